@@ -1,0 +1,1 @@
+"""App layer: launch profiles, the supervisor (launcher), node registry."""

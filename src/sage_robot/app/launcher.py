@@ -1,0 +1,187 @@
+"""The launcher: starts a profile's nodes, restarts a crashed one with backoff, stops all.
+
+Every node runs in its own supervised task. A node that raises is torn down, its health
+records the error and the restart count, and it is built again after a delay that
+doubles with each crash (reset once it has run for a while). When a *critical* node
+(MCU link, navigator, teleop bridge) goes down, the launcher commands a stop on
+``/cmd_vel`` and publishes an event, so no loss of command leaves the robot moving.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from sage_robot.core.bus import Bus
+from sage_robot.core.log import get_logger
+from sage_robot.core.msgs import DiagnosticArray, DiagnosticStatus, Event, Level, Twist
+from sage_robot.core.node import Health, Node, NodeContext, NodeState
+
+BACKOFF_INITIAL_S = 0.5
+BACKOFF_MAX_S = 10.0
+STABLE_AFTER_S = 30.0  # a node that ran this long starts again from the initial backoff
+DIAGNOSTICS_PERIOD_S = 1.0
+TEARDOWN_TIMEOUT_S = 3.0
+
+_LEVEL = {
+    NodeState.RUNNING: Level.OK,
+    NodeState.STARTING: Level.WARN,
+    NodeState.BACKOFF: Level.ERROR,
+    NodeState.FAILED: Level.ERROR,
+    NodeState.STOPPED: Level.STALE,
+    NodeState.CREATED: Level.STALE,
+}
+
+
+@dataclass
+class NodeSpec:
+    """One node of a profile."""
+
+    name: str
+    factory: Callable[[NodeContext], Node]
+    critical: bool = False  # its loss must stop the robot
+    restart: bool = True
+
+
+class Launcher:
+    def __init__(self, ctx: NodeContext, specs: list[NodeSpec]) -> None:
+        names = [s.name for s in specs]
+        if len(set(names)) != len(names):
+            raise ValueError(f"duplicate node names in {names}")
+        self.ctx, self.specs = ctx, specs
+        self.bus: Bus = ctx.bus
+        self.log = get_logger("launcher")
+        self.health: dict[str, Health] = {
+            s.name: Health(s.name, critical=s.critical) for s in specs
+        }
+        self.nodes: dict[str, Node] = {}
+        self._tasks: dict[str, asyncio.Task[None]] = {}
+        self._stopping = False
+        self._stop_event = asyncio.Event()
+        ctx.resources["launcher"] = self
+
+    # ---------------------------------------------------------------- public
+    async def start(self) -> None:
+        """Start every node (each in its own supervised task) and the diagnostics timer."""
+        for spec in self.specs:
+            self._tasks[spec.name] = asyncio.get_running_loop().create_task(
+                self._supervise(spec), name=f"supervise:{spec.name}"
+            )
+        self._diag = self.ctx.clock.every(
+            DIAGNOSTICS_PERIOD_S, self._publish_diagnostics, "diagnostics"
+        )
+
+    async def run(self) -> None:
+        """Start, then wait until :meth:`request_stop` (or a signal), then stop cleanly."""
+        await self.start()
+        await self._stop_event.wait()
+        await self.stop()
+
+    def request_stop(self) -> None:
+        self._stop_event.set()
+
+    def install_signal_handlers(self) -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.add_signal_handler(sig, self.request_stop)
+
+    async def stop(self) -> None:
+        """Stop every node (reverse order), tearing each down."""
+        self._stopping = True
+        if hasattr(self, "_diag"):
+            self._diag.cancel()
+        for spec in reversed(self.specs):
+            task = self._tasks.get(spec.name)
+            if task and not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
+            self.health[spec.name].state = NodeState.STOPPED
+        self._publish_diagnostics()
+
+    def health_report(self) -> dict[str, dict[str, object]]:
+        for name, node in self.nodes.items():
+            with contextlib.suppress(Exception):
+                self.health[name].stats = node.stats()
+        return {name: h.as_dict() for name, h in self.health.items()}
+
+    # ---------------------------------------------------------------- internals
+    async def _supervise(self, spec: NodeSpec) -> None:
+        health = self.health[spec.name]
+        backoff = BACKOFF_INITIAL_S
+        clock = self.ctx.clock
+        while not self._stopping:
+            health.state = NodeState.STARTING
+            node: Node | None = None
+            started = clock.now()
+            try:
+                node = spec.factory(self.ctx)
+                self.nodes[spec.name] = node
+                await node.setup()
+                health.state, health.started_at = NodeState.RUNNING, clock.now()
+                self.log.info("node running", node=spec.name)
+                await node.run()
+                health.state = NodeState.STOPPED
+                self.log.info("node finished", node=spec.name)
+                return
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:
+                health.last_error = f"{type(exc).__name__}: {exc}"
+                self.log.exception("node crashed", node=spec.name, restarts=health.restarts)
+                self._on_down(spec, health.last_error)
+            finally:
+                if node is not None:
+                    await self._teardown(spec.name, node)
+            if not spec.restart:
+                health.state = NodeState.FAILED
+                return
+            if clock.now() - started > STABLE_AFTER_S:
+                backoff = BACKOFF_INITIAL_S
+            health.state = NodeState.BACKOFF
+            health.restarts += 1
+            self.log.warning("restarting node", node=spec.name, delay_s=round(backoff, 2))
+            await clock.sleep(backoff)
+            backoff = min(backoff * 2, BACKOFF_MAX_S)
+
+    async def _teardown(self, name: str, node: Node) -> None:
+        try:
+            await asyncio.wait_for(asyncio.shield(self._teardown_inner(node)), TEARDOWN_TIMEOUT_S)
+        except Exception:
+            self.log.exception("teardown failed", node=name)
+
+    @staticmethod
+    async def _teardown_inner(node: Node) -> None:
+        try:
+            await node.teardown()
+        finally:
+            await node._close()
+
+    def _on_down(self, spec: NodeSpec, reason: str) -> None:
+        if not spec.critical:
+            return
+        self.log.error("critical node down: stopping the robot", node=spec.name)
+        self.bus.publish("/cmd_vel", Twist())
+        self.bus.publish(
+            "/sage/events",
+            Event(
+                self.ctx.clock.now(), "launcher", "safety_stop", f"{spec.name} is down: {reason}"
+            ),
+        )
+
+    def _publish_diagnostics(self) -> None:
+        report = self.health_report()
+        status = tuple(
+            DiagnosticStatus(
+                name,
+                _LEVEL[self.health[name].state],
+                h["last_error"] or h["state"],  # type: ignore[arg-type]
+                {"restarts": str(h["restarts"]), "state": str(h["state"])},
+            )
+            for name, h in report.items()
+        )
+        self.bus.publish("/diagnostics", DiagnosticArray(self.ctx.clock.now(), status))

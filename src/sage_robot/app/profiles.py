@@ -1,0 +1,16 @@
+"""Launch profiles: which nodes a mode runs. Names resolve through :mod:`registry`.
+
+Each entry is ``(node name, critical)``: a critical node's loss stops the robot.
+Areas add their nodes here as they land.
+"""
+
+from __future__ import annotations
+
+PROFILES: dict[str, list[tuple[str, bool]]] = {
+    # The whole system on the simulated robot in the simulated building.
+    "sim": [("heartbeat", False)],
+    # The real robot on a tour (the seed's start_robot.sh).
+    "tour": [("heartbeat", False)],
+    # The real robot building a map (the seed's slam_robot.sh).
+    "slam": [("heartbeat", False)],
+}

@@ -1,0 +1,87 @@
+"""Bus throughput and publish→callback latency, small and LaserScan-sized messages.
+
+Heavy packages are imported inside ``run`` in every bench module, so `sage --help`
+stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import time
+from typing import Any
+
+import numpy as np
+
+SCAN_BEAMS = 360  # a LaserScan like the RPLIDAR A1's
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--messages", type=int, default=20000, help="messages per case")
+
+
+async def _case(make: Any, n_subs: int, n_msgs: int) -> dict[str, float]:
+    from sage_robot.core.bus import Bus
+
+    bus = Bus()
+    latencies: list[float] = []
+    done = asyncio.Event()
+    received = 0
+    total = n_msgs * n_subs
+
+    def on_msg(msg: Any) -> None:
+        nonlocal received
+        latencies.append(time.perf_counter() - msg.stamp)
+        received += 1
+        if received >= total:
+            done.set()
+
+    for _ in range(n_subs):
+        bus.subscribe("/bench", type(make(0.0)), on_msg, maxsize=n_msgs)
+    t0 = time.perf_counter()
+    # Publish in bursts so subscribers run between them (like a 1 kHz producer at full speed).
+    for i in range(n_msgs):
+        bus.publish("/bench", make(time.perf_counter()))
+        if i % 10 == 9:
+            await asyncio.sleep(0)
+    await asyncio.wait_for(done.wait(), 60)
+    elapsed = time.perf_counter() - t0
+    lat = np.array(latencies) * 1e6
+    return {
+        "subscribers": n_subs,
+        "messages_per_s": round(total / elapsed),
+        "latency_p50_us": round(float(np.percentile(lat, 50)), 1),
+        "latency_p99_us": round(float(np.percentile(lat, 99)), 1),
+    }
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from dataclasses import replace
+
+    from sage_robot.core.msgs import LaserScan, Twist
+
+    scan_template = LaserScan(
+        0.0, "laser", -np.pi, np.pi / 180, 0.15, 12.0, np.ones(SCAN_BEAMS, dtype=np.float32)
+    )
+
+    def small(t: float) -> Any:
+        return _Stamped(t, Twist(0.3, 0.1))
+
+    def scan(t: float) -> Any:
+        return replace(scan_template, stamp=t)
+
+    cases = []
+    for label, make in (("small", small), ("laserscan", scan)):
+        for n_subs in (1, 10):
+            result = asyncio.run(_case(make, n_subs, args.messages))
+            cases.append({"message": label, **result})
+    return {"bench": "bus", "cases": cases}
+
+
+class _Stamped:
+    """A small message with a stamp (Twist has none)."""
+
+    __slots__ = ("payload", "stamp")
+
+    def __init__(self, stamp: float, payload: Any) -> None:
+        self.stamp, self.payload = stamp, payload

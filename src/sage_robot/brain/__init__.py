@@ -1,0 +1,1 @@
+"""Brain: the conversation agent (LLM or offline) and its tools."""

@@ -1,0 +1,33 @@
+"""`sage bench NAME --json`: benchmarks that print JSON. Each lives in ``sage_robot.bench``
+and provides ``add_arguments(parser)`` and ``run(args) -> dict``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+
+BENCHMARKS: dict[str, str] = {
+    "bus": "sage_robot.bench.bus",
+}
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser("bench", help="run a benchmark and print JSON")
+    p.set_defaults(help_parser=p)
+    bsub = p.add_subparsers(dest="bench", metavar="NAME")
+    for name, module_name in BENCHMARKS.items():
+        module = importlib.import_module(module_name)
+        bp = bsub.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0])
+        bp.add_argument("--json", action="store_true", help="print only the JSON line")
+        module.add_arguments(bp)
+        bp.set_defaults(func=lambda a, m=module: _run(m, a))
+
+
+def _run(module: object, args: argparse.Namespace) -> int:
+    result = module.run(args)  # type: ignore[attr-defined]
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(json.dumps(result, indent=2))
+    return 0

@@ -1,0 +1,1 @@
+"""Core: bus, clock, messages, geometry, config, logging. Imports nothing else of the project."""

@@ -1,0 +1,277 @@
+"""The bus: named, typed topics, services and actions between nodes (ROS 2 semantics).
+
+- Topics: publish/subscribe. Each subscriber has a bounded queue that drops the
+  *oldest* message when it falls behind (drops are counted); latched topics hand their
+  last value to late subscribers (``/map``).
+- Services: request/reply; a handler's exception comes back to the caller as
+  :class:`ServiceError`; calls time out on the bus clock.
+- Actions: :mod:`sage_robot.core.actions`.
+
+The bus is in-process (asyncio). Where messages travel is a :class:`Transport`: the
+default one keeps them local; a networked one (Zenoh) can forward publications to other
+processes and deliver theirs without nodes changing.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import inspect
+import logging
+import threading
+from abc import ABC, abstractmethod
+from collections import deque
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any, Generic, TypeVar
+
+from sage_robot.core.clock import Clock, WallClock
+from sage_robot.core.errors import ServiceError, ServiceTimeout, ServiceUnavailable
+
+M = TypeVar("M")
+Req = TypeVar("Req")
+Rep = TypeVar("Rep")
+
+DEFAULT_QUEUE = 10  # messages kept per subscriber before the oldest is dropped
+DEFAULT_SERVICE_TIMEOUT_S = 5.0
+
+_log = logging.getLogger("sage.bus")
+
+
+class Transport(ABC):
+    """Carries publications beyond this process. The bus calls :meth:`send` for every local
+    publication and hands :meth:`attach` a function that delivers remote ones locally."""
+
+    @abstractmethod
+    def attach(self, deliver: Callable[[str, Any], None]) -> None: ...
+
+    @abstractmethod
+    def send(self, topic: str, msg: Any) -> None: ...
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release sockets; the default transport has none."""
+
+
+class LocalTransport(Transport):
+    """Everything stays in this process."""
+
+    def attach(self, deliver: Callable[[str, Any], None]) -> None:
+        self._deliver = deliver
+
+    def send(self, topic: str, msg: Any) -> None:
+        return None
+
+
+@dataclass
+class TopicInfo:
+    name: str
+    msg_type: type
+    latched: bool = False
+    last: Any = None
+    published: int = 0
+    subscribers: list[Subscription[Any]] = field(default_factory=list)
+
+
+class Subscription(Generic[M]):
+    """A subscriber's bounded queue. Iterate it (``async for msg in sub``) or give a callback."""
+
+    def __init__(self, bus: Bus, topic: TopicInfo, maxsize: int) -> None:
+        if maxsize < 1:
+            raise ValueError("subscriber queue size must be >= 1")
+        self.bus, self.topic = bus, topic
+        self._queue: deque[M] = deque(maxlen=maxsize)
+        self._event = asyncio.Event()
+        self.dropped = 0
+        self.received = 0
+        self.callback_errors = 0
+        self.closed = False
+        self._task: asyncio.Task[None] | None = None
+
+    def _push(self, msg: M) -> None:
+        if len(self._queue) == self._queue.maxlen:
+            self.dropped += 1
+        self._queue.append(msg)
+        self.received += 1
+        self._event.set()
+
+    def pending(self) -> int:
+        return len(self._queue)
+
+    def get_nowait(self) -> M | None:
+        return self._queue.popleft() if self._queue else None
+
+    async def get(self) -> M:
+        while not self._queue:
+            if self.closed:
+                raise StopAsyncIteration
+            self._event.clear()
+            await self._event.wait()
+        return self._queue.popleft()
+
+    def __aiter__(self) -> Subscription[M]:
+        return self
+
+    async def __anext__(self) -> M:
+        return await self.get()
+
+    def close(self) -> None:
+        """Stop receiving; a callback task ends."""
+        if self.closed:
+            return
+        self.closed = True
+        if self in self.topic.subscribers:
+            self.topic.subscribers.remove(self)
+        self._event.set()
+        if self._task is not None:
+            self._task.cancel()
+
+    def _start_callback(self, callback: Callable[[M], Any]) -> None:
+        async def pump() -> None:
+            while not self.closed:
+                try:
+                    msg = await self.get()
+                except StopAsyncIteration:
+                    return
+                try:
+                    result = callback(msg)
+                    if inspect.isawaitable(result):
+                        await result
+                except asyncio.CancelledError:
+                    raise
+                except Exception:
+                    self.callback_errors += 1
+                    _log.exception("subscriber callback on %s failed", self.topic.name)
+
+        self._task = asyncio.get_running_loop().create_task(pump(), name=f"sub:{self.topic.name}")
+
+
+ServiceHandler = Callable[[Any], Awaitable[Any]]
+
+
+@dataclass
+class ServiceInfo:
+    name: str
+    handler: ServiceHandler
+    calls: int = 0
+    errors: int = 0
+
+
+class Bus:
+    """Topics and services between nodes, on one asyncio loop."""
+
+    def __init__(self, clock: Clock | None = None, transport: Transport | None = None) -> None:
+        self.clock = clock or WallClock()
+        self.transport = transport or LocalTransport()
+        self.transport.attach(self._deliver_local)
+        self._topics: dict[str, TopicInfo] = {}
+        self._services: dict[str, ServiceInfo] = {}
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._loop_thread: int | None = None
+        from sage_robot.core.actions import ActionRegistry  # the module builds on this one
+
+        self.actions = ActionRegistry(self)
+
+    # ------------------------------------------------------------ topics
+    def declare(self, name: str, msg_type: type, latched: bool = False) -> TopicInfo:
+        """Declare a topic's type (first use wins; a different type later is an error)."""
+        info = self._topics.get(name)
+        if info is None:
+            info = self._topics[name] = TopicInfo(name, msg_type, latched)
+        elif info.msg_type is not msg_type:
+            raise TypeError(
+                f"topic {name} carries {info.msg_type.__name__}, not {msg_type.__name__}"
+            )
+        info.latched = info.latched or latched
+        return info
+
+    def publish(self, name: str, msg: Any) -> None:
+        """Publish on this loop's thread. Other threads use :meth:`publish_threadsafe`."""
+        info = self._topics.get(name) or self.declare(name, type(msg))
+        if not isinstance(msg, info.msg_type):
+            raise TypeError(
+                f"topic {name} carries {info.msg_type.__name__}, got {type(msg).__name__}"
+            )
+        self._bind_loop()
+        self._deliver_local(name, msg)
+        self.transport.send(name, msg)
+
+    def publish_threadsafe(self, name: str, msg: Any) -> None:
+        """Publish from a driver thread (e.g. a serial RX thread)."""
+        if self._loop is None or threading.get_ident() == self._loop_thread:
+            self.publish(name, msg)
+        else:
+            self._loop.call_soon_threadsafe(self.publish, name, msg)
+
+    def _deliver_local(self, name: str, msg: Any) -> None:
+        info = self._topics.get(name) or self.declare(name, type(msg))
+        info.published += 1
+        if info.latched:
+            info.last = msg
+        for sub in list(info.subscribers):
+            sub._push(msg)
+
+    def subscribe(
+        self,
+        name: str,
+        msg_type: type[M],
+        callback: Callable[[M], Any] | None = None,
+        maxsize: int = DEFAULT_QUEUE,
+    ) -> Subscription[M]:
+        """Subscribe to a topic. With a callback, a task calls it for each message."""
+        info = self.declare(name, msg_type)
+        self._bind_loop()
+        sub: Subscription[M] = Subscription(self, info, maxsize)
+        info.subscribers.append(sub)
+        if info.latched and info.last is not None:
+            sub._push(info.last)
+        if callback is not None:
+            sub._start_callback(callback)
+        return sub
+
+    def latest(self, name: str) -> Any:
+        """The last value of a latched topic, or None."""
+        info = self._topics.get(name)
+        return info.last if info else None
+
+    def topics(self) -> dict[str, TopicInfo]:
+        return dict(self._topics)
+
+    # ------------------------------------------------------------ services
+    def serve(self, name: str, handler: ServiceHandler) -> None:
+        """Offer a service. ``handler(request)`` is async and returns the reply."""
+        if name in self._services:
+            raise ValueError(f"service {name} is already offered")
+        self._services[name] = ServiceInfo(name, handler)
+
+    def unserve(self, name: str) -> None:
+        self._services.pop(name, None)
+
+    def has_service(self, name: str) -> bool:
+        return name in self._services
+
+    async def call(
+        self, name: str, request: Any, timeout: float | None = DEFAULT_SERVICE_TIMEOUT_S
+    ) -> Any:
+        """Call a service; errors and time-outs raise :class:`ServiceError` subclasses."""
+        info = self._services.get(name)
+        if info is None:
+            raise ServiceUnavailable(f"no node offers the service {name}")
+        info.calls += 1
+        try:
+            return await self.clock.wait_for(info.handler(request), timeout)
+        except asyncio.TimeoutError:
+            info.errors += 1
+            raise ServiceTimeout(f"service {name} did not answer within {timeout:g} s") from None
+        except ServiceError:
+            info.errors += 1
+            raise
+        except Exception as exc:
+            info.errors += 1
+            raise ServiceError(f"service {name} failed: {exc}") from exc
+
+    def _bind_loop(self) -> None:
+        if self._loop is None:
+            try:
+                self._loop = asyncio.get_running_loop()
+                self._loop_thread = threading.get_ident()
+            except RuntimeError:
+                pass

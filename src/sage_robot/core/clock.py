@@ -1,0 +1,183 @@
+"""Time for every node: wall time on the robot, simulated time in the simulator.
+
+Nodes never call ``time.time()`` or a bare ``asyncio.sleep``: they ask the clock, so a
+simulation can run faster than real time and a test that drives 100 m of corridor
+takes seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import heapq
+import inspect
+import itertools
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Awaitable, Callable
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+SETTLE_ROUNDS = 8  # event-loop turns given to woken tasks after each simulated step
+TIME_EPS_S = 1e-9  # deadlines this close to "now" count as reached (float steps)
+
+
+class Clock(ABC):
+    """A source of time and of sleeps."""
+
+    is_simulated: bool = False
+
+    @abstractmethod
+    def now(self) -> float:
+        """Seconds. Wall: since the epoch. Simulated: since the simulation began."""
+
+    @abstractmethod
+    async def sleep_until(self, t: float) -> None:
+        """Return once ``now() >= t``."""
+
+    async def sleep(self, dt: float) -> None:
+        await self.sleep_until(self.now() + max(0.0, dt))
+
+    async def wait_for(self, aw: Awaitable[T], timeout: float | None) -> T:
+        """Like ``asyncio.wait_for`` but the timeout runs on this clock."""
+        task = asyncio.ensure_future(aw)
+        if timeout is None:
+            return await task
+        timer = asyncio.ensure_future(self.sleep(timeout))
+        try:
+            done, _ = await asyncio.wait({task, timer}, return_when=asyncio.FIRST_COMPLETED)
+        except asyncio.CancelledError:
+            task.cancel()
+            timer.cancel()
+            raise
+        if task in done:
+            timer.cancel()
+            return task.result()
+        task.cancel()
+        raise asyncio.TimeoutError(f"timed out after {timeout:g} s")
+
+    def every(self, period: float, callback: Callable[[], Any], name: str = "timer") -> Timer:
+        """Call ``callback`` (sync or async) every ``period`` seconds of this clock."""
+        return Timer(self, period, callback, name)
+
+
+class WallClock(Clock):
+    """Real time. ``now()`` is the epoch time; sleeps use the monotonic clock."""
+
+    def now(self) -> float:
+        return time.time()
+
+    async def sleep_until(self, t: float) -> None:
+        await asyncio.sleep(max(0.0, t - time.time()))
+
+    async def sleep(self, dt: float) -> None:
+        await asyncio.sleep(max(0.0, dt))
+
+
+class SimClock(Clock):
+    """Simulated time that only moves when :meth:`step` (or :meth:`run`) advances it.
+
+    Sleepers wait in a heap ordered by deadline, so timers fire in a deterministic order
+    and a simulated hour passes as fast as the machine can compute it.
+    """
+
+    is_simulated = True
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._now = start
+        self._waiters: list[tuple[float, int, asyncio.Future[None]]] = []
+        self._seq = itertools.count()
+
+    def now(self) -> float:
+        return self._now
+
+    async def sleep_until(self, t: float) -> None:
+        if t <= self._now:
+            await asyncio.sleep(0)
+            return
+        fut: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        heapq.heappush(self._waiters, (t, next(self._seq), fut))
+        await fut
+
+    def next_deadline(self) -> float | None:
+        """The earliest pending wake-up, or None when nobody sleeps."""
+        while self._waiters and self._waiters[0][2].done():
+            heapq.heappop(self._waiters)
+        return self._waiters[0][0] if self._waiters else None
+
+    def advance_to(self, t: float) -> None:
+        """Set the time (never backwards) and wake everyone whose deadline has come."""
+        self._now = max(self._now, t)
+        while self._waiters and self._waiters[0][0] <= self._now + TIME_EPS_S:
+            _, _, fut = heapq.heappop(self._waiters)
+            if not fut.done():
+                fut.set_result(None)
+
+    async def step(self, dt: float) -> None:
+        """Advance by ``dt`` seconds and let the woken tasks run."""
+        await self._step_to(self._now + dt)
+
+    async def _step_to(self, t: float) -> None:
+        self.advance_to(t)
+        for _ in range(SETTLE_ROUNDS):
+            await asyncio.sleep(0)
+
+    async def run(
+        self,
+        step_s: float,
+        speed: float | None = 1.0,
+        until: float | None = None,
+        stop: asyncio.Event | None = None,
+        on_step: Callable[[float], Any] | None = None,
+    ) -> None:
+        """Drive time forward in ``step_s`` increments.
+
+        ``speed`` is the real-time factor (1.0 real time, 10.0 ten times faster,
+        None as fast as possible). ``on_step(dt)`` runs before each advance: the
+        simulator's physics step.
+        """
+        wall0, sim0 = time.monotonic(), self._now
+        k = 0  # steps taken: time is sim0 + k * step_s, so float errors do not accumulate
+        while (until is None or self._now < until - TIME_EPS_S) and not (stop and stop.is_set()):
+            if on_step is not None:
+                result = on_step(step_s)
+                if inspect.isawaitable(result):
+                    await result
+            k += 1
+            await self._step_to(sim0 + k * step_s)
+            if speed is not None:
+                ahead = (self._now - sim0) / speed - (time.monotonic() - wall0)
+                if ahead > 0:
+                    await asyncio.sleep(ahead)
+
+
+class Timer:
+    """A periodic call on a clock; missed ticks are skipped, never bunched."""
+
+    def __init__(self, clock: Clock, period: float, callback: Callable[[], Any], name: str) -> None:
+        if period <= 0:
+            raise ValueError(f"timer {name!r}: period must be > 0, got {period}")
+        self.clock, self.period, self.callback, self.name = clock, period, callback, name
+        self.ticks = 0
+        self._start = clock.now()
+        self._task = asyncio.get_running_loop().create_task(self._loop(), name=f"timer:{name}")
+
+    async def _loop(self) -> None:
+        n = 1  # tick n is due at start + n * period
+        while True:
+            next_t = self._start + n * self.period
+            await self.clock.sleep_until(next_t)
+            self.ticks += 1
+            result = self.callback()
+            if inspect.isawaitable(result):
+                await result
+            n += 1
+            behind = int((self.clock.now() - self._start) / self.period)
+            n = max(n, behind + 1)  # fell behind: skip the missed ticks
+
+    def cancel(self) -> None:
+        self._task.cancel()
+
+    @property
+    def task(self) -> asyncio.Task[None]:
+        return self._task

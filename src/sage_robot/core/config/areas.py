@@ -1,0 +1,82 @@
+"""Settings of the areas above the hardware. Each area extends its own section here.
+
+Paths that are empty mean "the file shipped in the package".
+"""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from sage_robot.core.config.base import Section
+
+
+class SimSettings(Section):
+    map: str = Field("", description="Map YAML; empty = the shipped default building.")
+    waypoints: str = Field("", description="Waypoints YAML; empty = the map's own.")
+    speed: float | None = Field(1.0, description="Real-time factor; null = as fast as possible.")
+    seed: int = Field(7, description="Random seed of the world (people, noise).")
+    pedestrians: int = Field(6, ge=0, description="Simulated people walking about.")
+
+
+class NavSettings(Section):
+    initial_place: str = Field("DOCKING_STATION", description="Place of the initial pose.")
+    inflation_radius_m: float = Field(0.55, gt=0, description="Costmap inflation radius (m).")
+    cost_scaling_factor: float = Field(3.0, gt=0, description="Inflation decay rate (1/m).")
+    controller_hz: float = Field(20.0, gt=0, description="Controller rate (Hz).")
+    lookahead_m: float = Field(1.2, gt=0, description="Pure-pursuit lookahead (m).")
+    xy_goal_tolerance_m: float = Field(0.25, gt=0, description="Goal position tolerance (m).")
+    yaw_goal_tolerance_rad: float = Field(0.25, gt=0, description="Goal heading tolerance (rad).")
+    min_particles: int = Field(500, gt=0, description="AMCL particles, minimum.")
+    max_particles: int = Field(2000, gt=0, description="AMCL particles, maximum.")
+    use_ekf: bool = Field(False, description="Fuse IMU yaw rate with odometry (EKF).")
+    people_wait_s: float = Field(20.0, ge=0, description="Wait for people to step aside (s).")
+
+
+class VoiceSettings(Section):
+    enabled: bool = Field(True, description="Run the voice pipeline.")
+    wake_models: tuple[str, ...] = Field(
+        ("hey_jarvis", "alexa"), description="Names or .onnx paths."
+    )
+    wake_threshold: float = Field(0.6, ge=0, le=1, description="Wake-word score threshold.")
+    vad_threshold: float = Field(0.6, ge=0, le=1, description="Speech probability threshold.")
+    stt_model: str = Field("tiny.en", description="Whisper model name or path.")
+    stt_device: str = Field("cpu", description="'cpu' or 'cuda'.")
+    stt_compute_type: str = Field("int8", description="CTranslate2 compute type.")
+    tts_voice: str = Field("en_US-joe-medium", description="Piper voice name or .onnx path.")
+    mic_device: str = Field("", description="Input device name; empty = default.")
+    speaker_device: str = Field("", description="Output device name; empty = default.")
+
+
+class LlmSettings(Section):
+    base_url: str = Field("", description="OpenAI-compatible endpoint; empty = offline brain.")
+    model: str = Field("gpt-4o-mini", description="Chat model name.")
+    api_key_env: str = Field("OPENAI_API_KEY", description="Environment variable with the key.")
+    timeout_s: float = Field(20.0, gt=0, description="Request timeout (s).")
+    max_history_turns: int = Field(12, gt=0, description="Conversation turns kept.")
+    max_tool_rounds: int = Field(4, gt=0, description="Tool rounds per visitor turn.")
+    idle_reset_s: float = Field(120.0, gt=0, description="Forget the conversation after (s).")
+
+
+class KbSettings(Section):
+    backend: str = Field("sqlite", description="'sqlite' or 'postgres'.")
+    path: str = Field("", description="SQLite file; empty = the user's data directory.")
+    dsn: str = Field("", description="PostgreSQL DSN; empty with backend postgres = embedded.")
+    embedder: str = Field("all-MiniLM-L6-v2", description="Embedding model name.")
+    top_k: int = Field(5, gt=0, description="Passages returned by default.")
+
+
+class WebSettings(Section):
+    host: str = Field("0.0.0.0", description="Address the web server listens on.")
+    port: int = Field(8000, gt=0, lt=65536, description="Port of every page and socket.")
+    deadman_s: float = Field(0.5, gt=0, description="Teleop stops after this silence (s).")
+    allowed_origins: tuple[str, ...] = Field((), description="Extra WebSocket origins.")
+
+
+class EmailSettings(Section):
+    smtp_host: str = Field("", description="SMTP server; empty = no e-mail.")
+    smtp_port: int = Field(587, gt=0, lt=65536, description="SMTP port.")
+    starttls: bool = Field(True, description="Upgrade with STARTTLS.")
+    username: str = Field("", description="SMTP login; the password comes from SAGE_SMTP_PASSWORD.")
+    sender: str = Field("sage@localhost", description="From address.")
+    recipients: tuple[str, ...] = Field((), description="Who hears about a low battery.")
+    min_interval_s: float = Field(900.0, ge=0, description="At most one alert per kind per (s).")

@@ -1,0 +1,38 @@
+"""Names of the bus's topics, services and actions (ROS names where the seed has them).
+
+One table, so a typo is an import error and a reader sees every channel in one place.
+"""
+
+from __future__ import annotations
+
+# Topics
+CMD_VEL = "/cmd_vel"  # Twist: velocity command to the base
+ODOM = "/odom"  # Odometry: wheel odometry from the MCU
+IMU = "/imu/data"  # Imu
+BATTERY = "/battery_state"  # BatteryState
+SCAN = "/scan"  # LaserScan, in the lidar frame
+MAP = "/map"  # OccupancyGrid, latched
+AMCL_POSE = "/amcl_pose"  # PoseWithCovariance in the map frame
+INITIAL_POSE = "/initialpose"  # PoseWithCovariance: set the localization
+PLAN = "/plan"  # Path: the global plan
+GOAL_POSE = "/goal_pose"  # PoseStamped: a goal clicked on a map
+CAMERA = "/image_raw/compressed"  # CompressedImage (JPEG)
+DOA = "/doa"  # voice.Doa: speaker direction
+UI_STATE = "/sage/ui_state"  # voice.UiState: what the face shows
+EVENTS = "/sage/events"  # Event: arrivals, blocked by people, battery, safety stops
+SAY = "/sage/say"  # Text: something the robot should say
+DIAGNOSTICS = "/diagnostics"  # DiagnosticArray: node health
+MCU_STATUS = "/mcu/status"  # DiagnosticStatus: serial link state and statistics
+
+# Simulator-only truth (tests and benchmarks read these; nodes above sim never do)
+SIM_TRUTH = "/sim/ground_truth"  # Odometry in the map frame
+SIM_PEOPLE = "/sim/people"  # sim.People
+SIM_COLLISIONS = "/sim/collisions"  # Event per collision
+
+# Actions and services
+NAVIGATE_TO = "navigate_to"  # action: nav.NavigateGoal -> nav.NavigateResult
+TOUR = "tour"  # action: nav.TourGoal
+CANCEL_NAV = "/nav/cancel"  # service
+PLACES = "/nav/places"  # service: list of places
+WHERE_AM_I = "/nav/where_am_i"  # service
+KB_SEARCH = "/kb/search"  # service: kb.SearchRequest -> kb.SearchResponse

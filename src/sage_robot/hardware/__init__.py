@@ -1,0 +1,1 @@
+"""Real device drivers (MCU link, lidar, camera, audio). The simulator implements the same interfaces."""

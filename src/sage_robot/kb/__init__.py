@@ -1,0 +1,1 @@
+"""Knowledge base: ingest, embed, hybrid search, SQLite and PostgreSQL stores, HTTP API."""

@@ -1,0 +1,1 @@
+"""Navigation: maps, costmaps, localization, planning, control, navigator, SLAM."""

@@ -1,0 +1,1 @@
+"""The simulated world and devices: firmware model behind a pty, lidar, people, camera."""

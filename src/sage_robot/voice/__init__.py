@@ -1,0 +1,1 @@
+"""Voice: wake word, VAD, speech to text, text to speech, direction of arrival."""

@@ -1,0 +1,1 @@
+"""Web: one FastAPI server with the pages, REST and WebSockets."""

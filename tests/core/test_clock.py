@@ -1,0 +1,43 @@
+import asyncio
+import time
+
+from sage_robot.core.clock import SimClock
+
+
+async def test_simulated_timers_are_exact_and_faster_than_real_time():
+    clock = SimClock()
+    ticks_a: list[float] = []
+    ticks_b: list[float] = []
+    clock.every(0.1, lambda: ticks_a.append(clock.now()))
+    clock.every(0.25, lambda: ticks_b.append(clock.now()))
+    wall0 = time.monotonic()
+    await clock.run(step_s=0.01, speed=None, until=600.0)  # ten simulated minutes
+    wall = time.monotonic() - wall0
+    assert len(ticks_a) == 6000
+    assert len(ticks_b) == 2400
+    assert abs(ticks_a[-1] - 600.0) < 1e-6
+    assert wall < 60.0, f"simulated 600 s took {wall:.1f} s of wall time"
+
+
+async def test_sleepers_wake_in_deadline_order():
+    clock = SimClock()
+    order: list[str] = []
+
+    async def sleeper(name: str, dt: float) -> None:
+        await clock.sleep(dt)
+        order.append(name)
+
+    tasks = [asyncio.ensure_future(sleeper(n, d)) for n, d in (("c", 3), ("a", 1), ("b", 2))]
+    await asyncio.sleep(0)
+    for _ in range(4):
+        await clock.step(1.0)
+    await asyncio.gather(*tasks)
+    assert order == ["a", "b", "c"]
+
+
+async def test_run_at_a_real_time_factor():
+    clock = SimClock()
+    wall0 = time.monotonic()
+    await clock.run(step_s=0.01, speed=10.0, until=1.0)
+    wall = time.monotonic() - wall0
+    assert 0.08 < wall < 1.0

@@ -1,0 +1,64 @@
+import asyncio
+
+from sage_robot.app.launcher import Launcher, NodeSpec
+from sage_robot.core.bus import Bus
+from sage_robot.core.clock import SimClock
+from sage_robot.core.config import load_profile
+from sage_robot.core.msgs import Twist
+from sage_robot.core.node import Node, NodeContext, NodeState
+
+
+class Flaky(Node):
+    name = "flaky"
+    builds = 0
+    torn_down = 0
+
+    async def setup(self) -> None:
+        type(self).builds += 1
+        self.every(0.1, self._tick)
+
+    def _tick(self) -> None:
+        if type(self).builds <= 2:
+            raise RuntimeError("sensor exploded")
+
+    async def teardown(self) -> None:
+        type(self).torn_down += 1
+
+
+class Steady(Node):
+    name = "steady"
+    stopped = False
+
+    async def teardown(self) -> None:
+        type(self).stopped = True
+
+
+async def test_crashing_node_is_restarted_and_health_shows_it():
+    clock = SimClock()
+    ctx = NodeContext(Bus(clock), clock, load_profile())
+    stops: list[Twist] = []
+    ctx.bus.subscribe("/cmd_vel", Twist, stops.append)
+    launcher = Launcher(ctx, [NodeSpec("flaky", Flaky, critical=True), NodeSpec("steady", Steady)])
+    await launcher.start()
+    for _ in range(1000):  # 10 simulated seconds
+        await clock.step(0.01)
+    health = launcher.health_report()
+    assert health["flaky"]["restarts"] == 2
+    assert health["flaky"]["state"] == "running"
+    assert "sensor exploded" in health["flaky"]["last_error"]
+    assert Flaky.torn_down == 2
+    assert stops and all(t.is_zero for t in stops), "a critical crash must command a stop"
+    await launcher.stop()
+    assert Steady.stopped
+    assert all(h.state is NodeState.STOPPED for h in launcher.health.values())
+
+
+async def test_request_stop_ends_run():
+    clock = SimClock()
+    ctx = NodeContext(Bus(clock), clock, load_profile())
+    launcher = Launcher(ctx, [NodeSpec("steady", Steady)])
+    runner = asyncio.ensure_future(launcher.run())
+    await clock.step(0.1)
+    launcher.request_stop()
+    await asyncio.wait_for(runner, 2)
+    assert launcher.health["steady"].state is NodeState.STOPPED
