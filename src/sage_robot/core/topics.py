@@ -36,3 +36,7 @@ CANCEL_NAV = "/nav/cancel"  # service
 PLACES = "/nav/places"  # service: list of places
 WHERE_AM_I = "/nav/where_am_i"  # service
 KB_SEARCH = "/kb/search"  # service: kb.SearchRequest -> kb.SearchResponse
+CONVERSE = "converse"  # action: Text (what the visitor said) -> feedback Text (each sentence
+#   to speak, as it streams) -> result Text (the whole reply). Served by the brain.
+HEARD = "/sage/heard"  # Text: final transcript of a visitor turn (voice -> anyone)
+LOC_HEALTH = "/localization/health"  # nav.LocalizationHealth
