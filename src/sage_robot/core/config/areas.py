@@ -11,14 +11,15 @@ from sage_robot.core.config.base import Section
 
 
 class SimSettings(Section):
-    map: str = Field("", description="Map YAML; empty = the shipped default building.")
-    waypoints: str = Field("", description="Waypoints YAML; empty = the map's own.")
+    world_map: str = Field("", description="The true building's map YAML; empty = nav.map.")
     speed: float | None = Field(1.0, description="Real-time factor; null = as fast as possible.")
     seed: int = Field(7, description="Random seed of the world (people, noise).")
     pedestrians: int = Field(6, ge=0, description="Simulated people walking about.")
 
 
 class NavSettings(Section):
+    map: str = Field("", description="Map YAML; empty = the shipped default building.")
+    waypoints: str = Field("", description="Waypoints YAML; empty = waypoints.yaml beside the map.")
     initial_place: str = Field("DOCKING_STATION", description="Place of the initial pose.")
     inflation_radius_m: float = Field(0.55, gt=0, description="Costmap inflation radius (m).")
     cost_scaling_factor: float = Field(3.0, gt=0, description="Inflation decay rate (1/m).")
