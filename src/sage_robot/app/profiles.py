@@ -8,9 +8,15 @@ from __future__ import annotations
 
 PROFILES: dict[str, list[tuple[str, bool]]] = {
     # The whole system on the simulated robot in the simulated building.
-    "sim": [("heartbeat", False)],
+    "sim": [("mcu_sim", True), ("heartbeat", False), ("battery_watchdog", False), ("serial_bridge", True)],
     # The real robot on a tour (the seed's start_robot.sh).
-    "tour": [("heartbeat", False)],
+    "tour": [
+        ("heartbeat", False),
+        ("battery_watchdog", False),
+        ("lidar", False),
+        ("camera", False),
+        ("serial_bridge", True),
+    ],
     # The real robot building a map (the seed's slam_robot.sh).
-    "slam": [("heartbeat", False)],
+    "slam": [("heartbeat", False), ("lidar", False), ("camera", False)],
 }

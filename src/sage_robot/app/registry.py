@@ -10,6 +10,11 @@ from sage_robot.core.node import Node
 
 NODES: dict[str, str] = {
     "heartbeat": "sage_robot.app.builtin:HeartbeatNode",
+    "battery_watchdog": "sage_robot.app.battery_watchdog:BatteryWatchdogNode",
+    "lidar": "sage_robot.hardware.rplidar.node:LidarNode",
+    "camera": "sage_robot.hardware.camera:CameraNode",
+    "mcu_sim": "sage_robot.sim.mcu_pty:McuSimNode",
+    "serial_bridge": "sage_robot.hardware.mcu.bridge:SerialBridgeNode",
 }
 
 # Which extra provides a node's module, for the message when its import fails.

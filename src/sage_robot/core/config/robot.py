@@ -35,6 +35,12 @@ class McuSettings(Section):
     imu_enabled: bool = Field(False, description="Publish /imu/data (the seed's IMU variant).")
     imu_calibration_s: float = Field(5.0, ge=0, description="Still time for gyro bias (s).")
     reconnect_s: float = Field(1.0, gt=0, description="Delay between reopen attempts (s).")
+    cmd_timeout_s: float = Field(
+        0.0,
+        ge=0,
+        description="A /cmd_vel older than this stops being re-sent and a stop is sent "
+        "instead (s); 0 = a command stands until the next one.",
+    )
 
 
 class BatterySettings(Section):

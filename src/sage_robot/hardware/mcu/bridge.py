@@ -1,0 +1,273 @@
+"""SerialBridgeNode: the bus <-> STM32 link (the seed's serial_bridge.py).
+
+- ``/cmd_vel`` -> CMD frames, clamped to the profile's limits (never reverse unless the
+  profile allows it); a standing non-zero command is re-sent at ``mcu.resend_hz`` so the
+  MCU's 550 ms watchdog never trips mid-motion; a stop is sent on zero, when the command
+  grows older than ``mcu.cmd_timeout_s``, and on shutdown.
+- A dedicated RX thread decodes ODOM -> ``/odom``, BATTERY -> ``/battery_state`` and
+  (``mcu.imu_enabled``) IMU -> ``/imu/data`` after the start-up bias calibration,
+  publishing through ``bus.publish_threadsafe``.
+- The port is ``ctx.resources["mcu_port"]`` when a simulator put one there, else
+  ``mcu.port`` ('auto' finds /dev/ttyACM*). Losing it (USB unplug) logs one line,
+  publishes an ERROR DiagnosticStatus on ``/mcu/status`` while down and reopens every
+  ``mcu.reconnect_s`` until it is back.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from typing import Any
+
+from sage_robot.core import topics
+from sage_robot.core.errors import DeviceNotConnectedError
+from sage_robot.core.msgs import (
+    BatteryState,
+    DiagnosticStatus,
+    Imu,
+    Level,
+    Odometry,
+    Twist,
+)
+from sage_robot.core.node import Node
+from sage_robot.hardware.mcu import protocol as proto
+from sage_robot.hardware.mcu.convert import (
+    ImuCalibrator,
+    battery_from,
+    clamp_command,
+    odometry_from,
+)
+from sage_robot.hardware.mcu.port import find_port, open_port
+
+PORT_RESOURCE = "mcu_port"  # ctx.resources key: a port path set by the simulator
+LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
+STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
+RX_JOIN_TIMEOUT_S = 1.0  # the RX thread wakes every READ_TIMEOUT_S, so this is ample
+FROM_MCU = frozenset(t.code for t in proto.FRAME_TYPES.values() if t.direction is proto.Direction.FROM_MCU)
+
+
+class SerialBridgeNode(Node):
+    name = "serial_bridge"
+
+    async def setup(self) -> None:
+        self.mcu = self.settings.mcu
+        robot = self.settings.robot
+        self._limits = (robot.max_linear_mps, robot.max_angular_radps, robot.allow_reverse)
+        self.decoder = proto.Decoder(accept=FROM_MCU)
+        self._port: Any = None
+        self.port_path = ""
+        self._rx_thread: threading.Thread | None = None
+        self._rx_stop = threading.Event()
+        self._lost = threading.Event()
+        self._lost_reason = ""
+        self._next_open = self.clock.now()
+        self._down_logged = False
+        self._down_reason = "not opened yet"
+        self.command: tuple[float, float] = (0.0, 0.0)
+        self._command_t = self.clock.now()
+        self.counters: Counter[str] = Counter()
+        self._rates: dict[str, float] = {}
+        self._rate_base: tuple[float, dict[str, int]] = (self.clock.now(), {})
+        self.calibrator = ImuCalibrator(self.mcu.imu_calibration_s) if self.mcu.imu_enabled else None
+        self._moved_logged_at: float | None = None
+        self.bus.declare(topics.ODOM, Odometry)
+        self.bus.declare(topics.BATTERY, BatteryState)
+        self.bus.declare(topics.IMU, Imu)
+        self.bus.declare(topics.MCU_STATUS, DiagnosticStatus)
+        self.subscribe(topics.CMD_VEL, Twist, self._on_cmd_vel)
+        self.every(1.0 / self.mcu.resend_hz, self._resend, "serial_bridge.resend")
+        self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
+        self.spawn(self._link_loop(), "serial_bridge.link")
+
+    async def teardown(self) -> None:
+        if self._port is not None:
+            self._write(0.0, 0.0)
+        self._close_port()
+
+    # ------------------------------------------------------------ commands
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        v, w = clamp_command(msg.linear_x, msg.angular_z, *self._limits)
+        if (v, w) != (msg.linear_x, msg.angular_z):
+            self.counters["cmd_clamped"] += 1
+        self.command, self._command_t = (v, w), self.clock.now()
+        self._write(v, w)
+
+    def _resend(self) -> None:
+        if self.command == (0.0, 0.0):
+            return
+        timeout = self.mcu.cmd_timeout_s
+        if timeout > 0 and self.clock.now() - self._command_t > timeout:
+            self.log.warning("no /cmd_vel for a while: stopping", timeout_s=timeout)
+            self.counters["cmd_timeouts"] += 1
+            self.command = (0.0, 0.0)
+        self._write(*self.command)
+
+    def _write(self, v: float, w: float) -> None:
+        port = self._port
+        if port is None:
+            return
+        import serial
+
+        try:
+            port.write(proto.encode(proto.CMD, (v, w)))
+            self.counters["cmd_sent"] += 1
+        except serial.SerialTimeoutException:
+            self.counters["write_timeouts"] += 1
+        except (serial.SerialException, OSError) as exc:
+            self._mark_lost(f"write failed: {exc}")
+
+    # ------------------------------------------------------------ link
+    async def _link_loop(self) -> None:
+        while True:
+            if self._lost.is_set():
+                self._on_lost()
+            if self._port is None and self.clock.now() >= self._next_open:
+                self._try_open()
+            await self.clock.sleep(LINK_CHECK_S)
+
+    def _try_open(self) -> None:
+        self._next_open = self.clock.now() + self.mcu.reconnect_s
+        try:
+            path = self.ctx.resources.get(PORT_RESOURCE) or find_port(self.mcu.port)
+            port = open_port(path, self.mcu.baud)
+        except DeviceNotConnectedError as exc:
+            self._down_reason = str(exc)
+            if not self._down_logged:
+                self.log.warning("MCU not connected; retrying", reason=str(exc), every_s=self.mcu.reconnect_s)
+                self._down_logged = True
+                self._publish_status()
+            return
+        if self.counters["connects"]:
+            self.counters["reconnects"] += 1
+        self.counters["connects"] += 1
+        self._port, self.port_path, self._down_logged = port, path, False
+        self.decoder.reset()
+        self._lost.clear()
+        self._rx_stop = threading.Event()
+        self._rx_thread = threading.Thread(
+            target=self._rx_loop, args=(port, self._rx_stop), name="serial_bridge.rx", daemon=True
+        )
+        self._rx_thread.start()
+        self.log.info("MCU link up", port=path, baud=self.mcu.baud)
+        self._write(*self.command)
+        self._publish_status()
+
+    def _mark_lost(self, reason: str) -> None:
+        if not self._lost.is_set():
+            self._lost_reason = reason
+            self._lost.set()
+
+    def _on_lost(self) -> None:
+        reason = self._lost_reason
+        self._close_port()
+        self._lost.clear()
+        self._down_reason = f"link lost: {reason}"
+        self._down_logged = True
+        self._next_open = self.clock.now() + self.mcu.reconnect_s
+        self.counters["disconnects"] += 1
+        self.log.warning(
+            "MCU link lost; reconnecting by itself",
+            port=self.port_path,
+            reason=reason,
+            every_s=self.mcu.reconnect_s,
+        )
+        self._publish_status()
+
+    def _close_port(self) -> None:
+        self._rx_stop.set()
+        if self._rx_thread is not None:
+            self._rx_thread.join(RX_JOIN_TIMEOUT_S)
+            self._rx_thread = None
+        if self._port is not None:
+            try:
+                self._port.close()
+            except Exception as exc:  # closing a vanished device may fail; it is gone anyway
+                self.log.debug("closing the MCU port failed", error=str(exc))
+            self._port = None
+
+    # ------------------------------------------------------------ RX thread
+    def _rx_loop(self, port: Any, stop: threading.Event) -> None:
+        try:
+            while not stop.is_set():
+                data = port.read(port.in_waiting or 1)
+                if data:
+                    for frame in self.decoder.feed(data):
+                        self._on_frame(frame)
+        except Exception as exc:  # SerialException/OSError on unplug; anything else too
+            if not stop.is_set():
+                self._mark_lost(f"{type(exc).__name__}: {exc}")
+
+    def _on_frame(self, frame: proto.Frame) -> None:
+        now = self.clock.now()
+        kind = frame.kind
+        if kind is proto.ODOM:
+            self.bus.publish_threadsafe(topics.ODOM, odometry_from(frame.values, now))
+        elif kind is proto.BATTERY:
+            msg = battery_from(frame.values[0], self.settings.battery.discharge_curve, now)
+            self.bus.publish_threadsafe(topics.BATTERY, msg)
+        elif kind is proto.IMU and self.calibrator is not None:
+            self._on_imu(frame.values, now)
+
+    def _on_imu(self, values: tuple[float, ...], now: float) -> None:
+        cal = self.calibrator
+        assert cal is not None
+        if cal.bias is None:
+            result = cal.add(now, values[:3], values[3:])
+            if result.moved and (
+                self._moved_logged_at is None or now - self._moved_logged_at >= cal.window_s
+            ):
+                self._moved_logged_at = now
+                self.log.warning(
+                    "robot moved during IMU calibration: keep it still; retrying",
+                    window_s=cal.window_s,
+                    retries=cal.retries,
+                )
+            if result.done:
+                bias = cal.bias or (0.0, 0.0, 0.0)
+                self.log.info("IMU calibrated", bias_radps=[round(b, 5) for b in bias])
+            return
+        self.bus.publish_threadsafe(topics.IMU, cal.correct(values, now))
+
+    # ------------------------------------------------------------ health
+    @property
+    def connected(self) -> bool:
+        return self._port is not None and not self._lost.is_set()
+
+    def _update_rates(self) -> None:
+        now = self.clock.now()
+        t0, base = self._rate_base
+        frames = dict(self.decoder.stats.frames)
+        if now > t0:
+            self._rates = {k: round((frames.get(k, 0) - base.get(k, 0)) / (now - t0), 1) for k in frames}
+        self._rate_base = (now, frames)
+
+    def _publish_status(self) -> None:
+        self._update_rates()
+        st = self.decoder.stats
+        values = {
+            "port": self.port_path,
+            "frames_per_s": str(self._rates),
+            "bytes_dropped": str(st.bytes_dropped),
+            "errors": str(dict(st.errors)),
+            "cmd_sent": str(self.counters["cmd_sent"]),
+        }
+        if self.connected:
+            status = DiagnosticStatus("mcu", Level.OK, f"connected to {self.port_path}", values)
+        else:
+            status = DiagnosticStatus("mcu", Level.ERROR, f"MCU disconnected: {self._down_reason}", values)
+        self.bus.publish(topics.MCU_STATUS, status)
+
+    def stats(self) -> dict[str, Any]:
+        st = self.decoder.stats
+        return {
+            "connected": self.connected,
+            "port": self.port_path,
+            "frames": dict(st.frames),
+            "frames_per_s": dict(self._rates),
+            "bytes_in": st.bytes_in,
+            "bytes_dropped": st.bytes_dropped,
+            "errors": dict(st.errors),
+            "command": list(self.command),
+            "imu_calibrated": bool(self.calibrator and self.calibrator.bias is not None),
+            **dict(self.counters),
+        }

@@ -1,0 +1,171 @@
+"""The firmware model behind a pseudo-terminal, so the real serial bridge talks to it
+unchanged, and McuSimNode, which runs it on the simulator's clock.
+
+``PtyMcu.port_name`` is a stable symlink in a private temp directory that points at the
+pty's slave (like /dev/serial/by-id on the robot): :meth:`PtyMcu.unplug` closes the pty
+and removes the link, as a USB unplug removes /dev/ttyACM0; :meth:`PtyMcu.replug`
+opens a new pty and puts the link back, so a bridge configured with the link finds the
+device again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+import termios
+import tty
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core.node import Node
+from sage_robot.sim.firmware import FirmwareModel, FirmwareParams
+from sage_robot.sim.flat_floor import FlatFloor, SimBody
+
+BAUD = termios.B115200
+READ_CHUNK = 4096  # bytes read from the master per call
+LINK_NAME = "ttySIM0"
+PORT_RESOURCE = "mcu_port"  # ctx.resources key the serial bridge reads
+WORLD_RESOURCE = "sim_world"  # ctx.resources key of the simulated world, when there is one
+MCU_SIM_RESOURCE = "mcu_sim"  # ctx.resources key of this node (tests, the world)
+
+
+class PtyMcu:
+    """A pty pair with the firmware model on the master side."""
+
+    def __init__(self, firmware: FirmwareModel) -> None:
+        self.firmware = firmware
+        self._dir = tempfile.mkdtemp(prefix="sage-mcu-")
+        self.port_name = os.path.join(self._dir, LINK_NAME)
+        self.master_fd = -1
+        self._slave_fd = -1
+        self.slave_name = ""
+        self.bytes_dropped = 0  # bytes the firmware sent while nobody read them
+        self._open()
+
+    def _open(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        attrs = termios.tcgetattr(slave)
+        attrs[4] = attrs[5] = BAUD  # ispeed, ospeed
+        termios.tcsetattr(slave, termios.TCSANOW, attrs)
+        os.set_blocking(master, False)
+        self.master_fd, self._slave_fd = master, slave
+        self.slave_name = os.ttyname(slave)
+        tmp = self.port_name + ".new"
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        os.symlink(self.slave_name, tmp)
+        os.replace(tmp, self.port_name)
+
+    @property
+    def plugged(self) -> bool:
+        return self.master_fd >= 0
+
+    def pump(self, now: float) -> None:
+        """Non-blocking: Jetson bytes -> firmware; the firmware's due frames -> Jetson."""
+        if not self.plugged:
+            return
+        while True:
+            try:
+                data = os.read(self.master_fd, READ_CHUNK)
+            except (BlockingIOError, OSError):  # nothing waiting (EAGAIN) or no reader (EIO)
+                break
+            if not data:
+                break
+            self.firmware.receive(data)
+        out = self.firmware.transmit(now)
+        if out:
+            try:
+                written = os.write(self.master_fd, out)
+            except (BlockingIOError, OSError):  # nobody reads: the buffer is full
+                written = 0
+            self.bytes_dropped += len(out) - written
+
+    def inject(self, data: bytes) -> None:
+        """Write raw bytes toward the Jetson (tests: corrupt the line)."""
+        if self.plugged:
+            os.write(self.master_fd, data)
+
+    def unplug(self) -> None:
+        """Close the pty and remove the link: the bridge's port vanishes."""
+        if not self.plugged:
+            return
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.port_name)
+        for fd in (self.master_fd, self._slave_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self.master_fd = self._slave_fd = -1
+
+    def replug(self) -> None:
+        """A new pty behind the same link."""
+        if not self.plugged:
+            self._open()
+
+    def close(self) -> None:
+        self.unplug()
+        shutil.rmtree(self._dir, ignore_errors=True)
+
+
+class McuSimNode(Node):
+    """The simulated MCU: firmware model + pty + a body, stepped before each clock step.
+
+    Puts the pty's path in ``ctx.resources["mcu_port"]`` for the serial bridge. The body
+    is ``ctx.resources["sim_world"].body`` when a world provides one (any
+    :class:`SimBody`), else a :class:`FlatFloor` of its own.
+    """
+
+    name = "mcu_sim"
+
+    async def setup(self) -> None:
+        from sage_robot.app.runtime import SIM_STEP_HOOKS
+
+        robot = self.settings.robot
+        params = FirmwareParams(track_width_m=robot.track_width_m)
+        rng = np.random.default_rng(self.settings.sim.seed)
+        self.firmware = FirmwareModel(params, rng)
+        self.floor = FlatFloor(robot.track_width_m)
+        self.pty = PtyMcu(self.firmware)
+        self.ctx.resources[PORT_RESOURCE] = self.pty.port_name
+        self.ctx.resources[MCU_SIM_RESOURCE] = self
+        self._hooks: list[Any] = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
+        self._hooks.append(self.physics_step)
+        self.log.info("simulated MCU ready", port=self.pty.port_name, pty=self.pty.slave_name)
+
+    @property
+    def body(self) -> SimBody:
+        world = self.ctx.resources.get(WORLD_RESOURCE)
+        body = getattr(world, "body", None)
+        return body if body is not None else self.floor
+
+    def physics_step(self, dt: float) -> None:
+        """One simulator step of ``dt`` s ending at clock time now + dt."""
+        t = self.clock.now() + dt
+        wheels = self.firmware.control_step(dt, t)
+        v, w = self.body.step(dt, wheels)
+        self.firmware.sense(dt, v, w)
+        self.pty.pump(t)
+
+    async def teardown(self) -> None:
+        if self.physics_step in getattr(self, "_hooks", []):
+            self._hooks.remove(self.physics_step)
+        if self.ctx.resources.get(MCU_SIM_RESOURCE) is self:
+            self.ctx.resources.pop(MCU_SIM_RESOURCE, None)
+            self.ctx.resources.pop(PORT_RESOURCE, None)
+        if hasattr(self, "pty"):
+            self.pty.close()
+
+    def stats(self) -> dict[str, Any]:
+        fw = self.firmware
+        return {
+            "port": self.pty.port_name,
+            "frames_sent": dict(fw.frames_sent),
+            "commands_received": fw.rx.frames,
+            "rx_errors": dict(fw.rx.errors),
+            "watchdog_trips": fw.watchdog_trips,
+            "pwm_us": list(fw.pwm_us),
+            "battery_v": round(fw.battery_voltage, 3),
+        }
