@@ -8,7 +8,7 @@ from __future__ import annotations
 
 PROFILES: dict[str, list[tuple[str, bool]]] = {
     # The whole system on the simulated robot in the simulated building.
-    "sim": [("mcu_sim", True), ("heartbeat", False), ("battery_watchdog", False), ("serial_bridge", True)],
+    "sim": [("mcu_sim", True), ("heartbeat", False), ("battery_watchdog", False), ("serial_bridge", True), ("web", True)],
     # The real robot on a tour (the seed's start_robot.sh).
     "tour": [
         ("heartbeat", False),
@@ -16,6 +16,7 @@ PROFILES: dict[str, list[tuple[str, bool]]] = {
         ("lidar", False),
         ("camera", False),
         ("serial_bridge", True),
+        ("web", True),
     ],
     # The real robot building a map (the seed's slam_robot.sh).
     "slam": [("heartbeat", False), ("lidar", False), ("camera", False)],

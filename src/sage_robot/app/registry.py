@@ -15,6 +15,7 @@ NODES: dict[str, str] = {
     "camera": "sage_robot.hardware.camera:CameraNode",
     "mcu_sim": "sage_robot.sim.mcu_pty:McuSimNode",
     "serial_bridge": "sage_robot.hardware.mcu.bridge:SerialBridgeNode",
+    "web": "sage_robot.web.node:WebNode",
 }
 
 # Which extra provides a node's module, for the message when its import fails.

@@ -15,6 +15,7 @@ processes and deliver theirs without nodes changing.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import inspect
 import logging
 import threading
@@ -198,8 +199,9 @@ class Bus:
         """Publish from a driver thread (e.g. a serial RX thread)."""
         if self._loop is None or threading.get_ident() == self._loop_thread:
             self.publish(name, msg)
-        else:
-            self._loop.call_soon_threadsafe(self.publish, name, msg)
+        elif not self._loop.is_closed():
+            with contextlib.suppress(RuntimeError):  # the loop closed in between: shutting down
+                self._loop.call_soon_threadsafe(self.publish, name, msg)
 
     def _deliver_local(self, name: str, msg: Any) -> None:
         info = self._topics.get(name) or self.declare(name, type(msg))

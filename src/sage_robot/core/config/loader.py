@@ -20,6 +20,7 @@ from sage_robot.core.config.areas import (
     WebSettings,
 )
 from sage_robot.core.config.base import Section
+from sage_robot.core.config.devices import CameraSettings, LidarSettings
 from sage_robot.core.config.robot import BatterySettings, McuSettings, RobotSettings
 from sage_robot.core.errors import ConfigError
 
@@ -30,6 +31,8 @@ class Settings(Section):
     robot: RobotSettings = Field(default_factory=RobotSettings)
     mcu: McuSettings = Field(default_factory=McuSettings)
     battery: BatterySettings = Field(default_factory=BatterySettings)
+    lidar: LidarSettings = Field(default_factory=LidarSettings)
+    camera: CameraSettings = Field(default_factory=CameraSettings)
     sim: SimSettings = Field(default_factory=SimSettings)
     nav: NavSettings = Field(default_factory=NavSettings)
     voice: VoiceSettings = Field(default_factory=VoiceSettings)

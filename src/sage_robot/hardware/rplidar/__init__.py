@@ -1,0 +1,1 @@
+"""RPLIDAR A1 (the seed robot's lidar): serial protocol, driver and node."""

@@ -1,0 +1,91 @@
+"""The ``lidar`` node: RPLIDAR A1 → ``/scan`` at the device's rate, reconnecting by itself."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from typing import Any
+
+from sage_robot.core import topics
+from sage_robot.core.errors import DeviceNotConnectedError
+from sage_robot.core.msgs import DiagnosticStatus, Level
+from sage_robot.core.node import Node
+from sage_robot.hardware.rplidar.driver import RplidarDriver, revolution_to_scan
+from sage_robot.hardware.rplidar.protocol import ProtocolError
+
+LIDAR_STATUS = "/lidar/status"
+
+
+class LidarNode(Node):
+    name = "lidar"
+
+    async def setup(self) -> None:
+        self._stop = threading.Event()
+        self.connected = False
+        self.device = ""
+        self.driver: RplidarDriver | None = None
+        self._loop = asyncio.get_running_loop()
+        self._thread = threading.Thread(target=self._rx, name="lidar-rx", daemon=True)
+        self._thread.start()
+        self.spawn(self._watch_thread())
+
+    async def _watch_thread(self) -> None:
+        while self._thread.is_alive():
+            await asyncio.sleep(0.5)
+
+    def _status(self, level: Level, message: str) -> None:
+        self.bus.publish_threadsafe(
+            LIDAR_STATUS, DiagnosticStatus("lidar", level, message, {"port": self.settings.lidar.port})
+        )
+
+    def _rx(self) -> None:
+        cfg = self.settings.lidar
+        warned = False
+        while not self._stop.is_set():
+            driver = RplidarDriver(cfg.port, cfg.baud)
+            try:
+                driver.connect()
+                info = driver.info()
+                health, code = driver.health()
+                self.device = (
+                    f"model {info.model:#x} fw {info.firmware[0]}.{info.firmware[1]} sn {info.serial}"
+                )
+                if health == "error":
+                    raise DeviceNotConnectedError(
+                        f"lidar reports a hardware error (code {code}); power-cycle it"
+                    )
+                self.driver, self.connected, warned = driver, True, False
+                self.log.info("lidar connected", port=cfg.port, device=self.device, health=health)
+                self._status(Level.OK, f"scanning ({health})")
+                last = self.clock.now()
+                for rev in driver.revolutions():
+                    if self._stop.is_set():
+                        break
+                    now = self.clock.now()
+                    scan = revolution_to_scan(rev, now, max(now - last, 1e-3))
+                    last = now
+                    self.bus.publish_threadsafe(topics.SCAN, scan)
+            except (DeviceNotConnectedError, ProtocolError, OSError) as exc:
+                self.connected = False
+                if not warned:
+                    self.log.warning("lidar unavailable, retrying", port=cfg.port, error=str(exc))
+                    warned = True
+                self._status(Level.ERROR, str(exc))
+            finally:
+                driver.disconnect()
+            self._stop.wait(cfg.reconnect_s)
+
+    async def teardown(self) -> None:
+        self._stop.set()
+        if self.driver is not None:
+            self.driver.disconnect()
+        await asyncio.to_thread(self._thread.join, 3.0)
+
+    def stats(self) -> dict[str, Any]:
+        s = self.driver.stats if self.driver else None
+        return {
+            "connected": self.connected,
+            "device": self.device,
+            "revolutions": s.revolutions if s else 0,
+            "resyncs": s.resyncs if s else 0,
+        }
