@@ -13,6 +13,7 @@ import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -42,7 +43,7 @@ class RplidarDriver:
 
     def __init__(self, port: str, baud: int = p.BAUD) -> None:
         self.port, self.baud = port, baud
-        self._ser = None
+        self._ser: Any = None  # serial.Serial once connected
         self.stats = LinkStats()
 
     # ------------------------------------------------------------ session
@@ -58,7 +59,7 @@ class RplidarDriver:
     def _motor(self, on: bool) -> None:
         """A1 adapter: DTR low runs the motor. A pseudo-terminal has no modem lines."""
         with contextlib.suppress(OSError):
-            self._ser.dtr = not on  # type: ignore[union-attr]
+            self._ser.dtr = not on
 
     def disconnect(self) -> None:
         if self._ser is not None:
