@@ -9,6 +9,8 @@ import json
 
 BENCHMARKS: dict[str, str] = {
     "bus": "sage_robot.bench.bus",
+    "kb": "sage_robot.bench.kb",
+    "mcu": "sage_robot.bench.mcu",
 }
 
 

@@ -169,3 +169,50 @@ class McuSimNode(Node):
             "pwm_us": list(fw.pwm_us),
             "battery_v": round(fw.battery_voltage, 3),
         }
+
+
+class RealTimeMcu:
+    """The firmware model on a flat floor, stepped in wall-clock time by a thread.
+
+    For tools that run without the simulator's clock (``sage mcu monitor --sim``,
+    ``sage bench mcu``). Use as a context manager; ``port_name`` is the pty link.
+    """
+
+    def __init__(self, firmware: FirmwareModel | None = None, step_s: float = 0.01) -> None:
+        import threading
+
+        self.firmware = firmware or FirmwareModel()
+        self.floor = FlatFloor(self.firmware.params.track_width_m)
+        self.pty = PtyMcu(self.firmware)
+        self.port_name = self.pty.port_name
+        self.step_s = step_s
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="mcu-sim", daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        import time
+
+        t0 = time.monotonic()
+        k = 0
+        while not self._stop.is_set():
+            k += 1
+            t = k * self.step_s
+            wheels = self.firmware.control_step(self.step_s, t)
+            v, w = self.floor.step(self.step_s, wheels)
+            self.firmware.sense(self.step_s, v, w)
+            self.pty.pump(t)
+            delay = t0 + t - time.monotonic()
+            if delay > 0:
+                self._stop.wait(delay)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+        self.pty.close()
+
+    def __enter__(self) -> RealTimeMcu:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
