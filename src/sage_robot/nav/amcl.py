@@ -1,0 +1,304 @@
+"""A particle filter equivalent to ROS AMCL (Thrun, Burgard, Fox, *Probabilistic Robotics*).
+
+- Motion: the odometry model for a differential drive (``sample_motion_model_odometry``,
+  table 5.6) with AMCL's ``alpha1..4``.
+- Sensor: the likelihood field: each beam endpoint scores
+  ``z_hit * N(d; 0, sigma_hit) + z_rand / range_max`` where ``d`` is the distance from the
+  endpoint to the nearest occupied map cell (``scipy.ndimage.distance_transform_edt``).
+  Beams are correlated, so the log-likelihood is tempered by ``BEAM_TEMPER``.
+- KLD-adaptive particle count between ``min_particles`` and ``max_particles``
+  (Fox 2003; AMCL's ``pf_err`` 0.01, ``pf_z`` 0.99) over 0.5 m × 0.5 m × 10° bins.
+- Augmented MCL: ``w_slow``/``w_fast`` averages of the measurement likelihood; when the
+  fit drops, that fraction of particles is redrawn uniformly over free space.
+- Global localization: candidates over all free space scored against the scan, the best
+  ``max_particles`` kept (a better start than AMCL's uniform draw on a large floor).
+
+Conventions: map frame, metres and radians; particles are an (N, 3) array of
+(x, y, theta); weights sum to 1. Randomness only from the ``numpy.random.Generator``
+given to the constructor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from sage_robot.core.geometry import compose, relative, wrap_angle, wrap_angles
+from sage_robot.core.msgs import OccupancyGrid
+from sage_robot.nav.costmap import OCCUPIED_MIN, GridGeometry
+
+SIGMA_HIT_M = 0.2  # AMCL laser_sigma_hit
+Z_HIT, Z_RAND = 0.5, 0.5  # AMCL laser_z_hit / laser_z_rand
+LIKELIHOOD_MAX_DIST_M = 2.0  # AMCL laser_likelihood_max_dist
+BEAM_TEMPER = 0.2  # beams are not independent: log-likelihoods are scaled by this
+# AMCL alpha1..4: rot from rot, rot from trans, trans from trans, trans from rot
+ALPHAS = (0.2, 0.2, 0.2, 0.2)
+UPDATE_MIN_D_M = 0.25  # AMCL update_min_d
+UPDATE_MIN_A_RAD = 0.2  # AMCL update_min_a
+KLD_ERR, KLD_Z = 0.01, 2.326  # pf_err, z of the 0.99 quantile (AMCL pf_z)
+KLD_BIN_M, KLD_BIN_RAD = 0.5, math.radians(10.0)
+ALPHA_SLOW, ALPHA_FAST = 0.001, 0.1  # AMCL recovery_alpha_slow / _fast
+GLOBAL_CANDIDATES = 60_000  # poses scored during global localization
+GLOBAL_HEADINGS = 16
+GLOBAL_BEAMS = 30
+INIT_SIGMA_XY_M, INIT_SIGMA_YAW_RAD = 0.25, 0.2
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Mean pose (x, y, theta) and its 3×3 covariance (row-major tuple)."""
+
+    x: float
+    y: float
+    theta: float
+    covariance: tuple[float, ...]
+
+
+class LikelihoodField:
+    """Distance (m) from every cell to the nearest occupied cell, capped, and a free-cell index."""
+
+    def __init__(self, grid: OccupancyGrid) -> None:
+        self.geom = GridGeometry.of(grid)
+        occupied = grid.data >= OCCUPIED_MIN
+        dist = ndimage.distance_transform_edt(~occupied) * grid.resolution
+        self.dist = np.minimum(dist, LIKELIHOOD_MAX_DIST_M).astype(np.float32)
+        self.free_cells = np.argwhere(grid.data == 0)
+        if len(self.free_cells) == 0:
+            raise ValueError("the map has no free cells to localize in")
+
+    def distances(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Distances at world points; outside the map counts as far from everything."""
+        r, c = self.geom.to_cell(x, y)
+        ok = self.geom.inside(r, c)
+        out = np.full(np.shape(r), LIKELIHOOD_MAX_DIST_M, dtype=np.float32)
+        out[ok] = self.dist[r[ok], c[ok]]
+        return out
+
+    def random_free_poses(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        idx = rng.integers(0, len(self.free_cells), n)
+        rc = self.free_cells[idx].astype(np.float64) + rng.random((n, 2))
+        res = self.geom.resolution
+        return np.column_stack([
+            self.geom.origin_x + rc[:, 1] * res,
+            self.geom.origin_y + rc[:, 0] * res,
+            rng.uniform(-math.pi, math.pi, n),
+        ])
+
+
+def beam_log_likelihood(field: LikelihoodField, poses: np.ndarray, sensor: tuple[float, float, float],
+                        angles: np.ndarray, ranges: np.ndarray, range_max: float) -> np.ndarray:
+    """Sum over beams of log(z_hit·N(d) + z_rand/range_max) for each pose → (N,).
+    ``sensor`` is the lidar's pose in base_link; beams with no return are skipped."""
+    sx, sy, st = sensor
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    ox = poses[:, 0] + c * sx - s * sy
+    oy = poses[:, 1] + s * sx + c * sy
+    a = poses[:, 2:3] + st + angles[None, :]
+    ex = ox[:, None] + ranges[None, :] * np.cos(a)
+    ey = oy[:, None] + ranges[None, :] * np.sin(a)
+    d = field.distances(ex, ey)
+    p = Z_HIT * np.exp(-0.5 * (d / SIGMA_HIT_M) ** 2) + Z_RAND / range_max
+    return np.log(p).sum(axis=1)
+
+
+def kld_count(bins: int, n_min: int, n_max: int) -> int:
+    """Particles needed so the KL divergence to the true posterior stays below KLD_ERR."""
+    if bins <= 1:
+        return n_min
+    k = bins - 1
+    b = 2.0 / (9.0 * k)
+    n = k / (2.0 * KLD_ERR) * (1.0 - b + math.sqrt(b) * KLD_Z) ** 3
+    return int(min(max(n, n_min), n_max))
+
+
+def sample_odometry(particles: np.ndarray, prev: tuple[float, float, float],
+                    cur: tuple[float, float, float], rng: np.random.Generator,
+                    alphas: tuple[float, float, float, float] = ALPHAS) -> np.ndarray:
+    """Move every particle by the odometry increment prev→cur (odom frame), with noise."""
+    dx, dy = cur[0] - prev[0], cur[1] - prev[1]
+    trans = math.hypot(dx, dy)
+    rot1 = wrap_angle(math.atan2(dy, dx) - prev[2]) if trans > 0.01 else 0.0
+    if abs(rot1) > math.pi / 2:  # moved backwards: model it as reversing, as AMCL does
+        rot1 = wrap_angle(rot1 - math.pi)
+        trans = -trans
+    rot2 = wrap_angle(cur[2] - prev[2] - rot1)
+    a1, a2, a3, a4 = alphas
+    n = len(particles)
+    # AMCL uses the smaller of the two rotation directions for the noise
+    r1n = min(abs(rot1), abs(wrap_angle(rot1 - math.pi)))
+    r2n = min(abs(rot2), abs(wrap_angle(rot2 - math.pi)))
+    rot1_h = rot1 - rng.normal(0, math.sqrt(a1 * r1n**2 + a2 * trans**2), n)
+    trans_h = trans - rng.normal(0, math.sqrt(a3 * trans**2 + a4 * (r1n**2 + r2n**2)), n)
+    rot2_h = rot2 - rng.normal(0, math.sqrt(a1 * r2n**2 + a2 * trans**2), n)
+    out = particles.copy()
+    heading = particles[:, 2] + rot1_h
+    out[:, 0] += trans_h * np.cos(heading)
+    out[:, 1] += trans_h * np.sin(heading)
+    out[:, 2] = wrap_angles(particles[:, 2] + rot1_h + rot2_h)
+    return out
+
+
+class ParticleFilter:
+    """AMCL. Call :meth:`set_pose` or :meth:`global_localization`, then :meth:`update` with each
+    odometry pose and scan; :meth:`estimate` gives the mean and covariance."""
+
+    def __init__(self, grid: OccupancyGrid, rng: np.random.Generator, min_particles: int = 500,
+                 max_particles: int = 2000, sensor: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                 beams: int = 60) -> None:
+        if not 0 < min_particles <= max_particles:
+            raise ValueError("need 0 < min_particles <= max_particles")
+        self.field = LikelihoodField(grid)
+        self.rng = rng
+        self.n_min, self.n_max = min_particles, max_particles
+        self.sensor, self.beams = sensor, beams
+        self.particles = np.zeros((min_particles, 3))
+        self.weights = np.full(min_particles, 1.0 / min_particles)
+        self.w_slow = self.w_fast = 0.0
+        self._odom_ref: tuple[float, float, float] | None = None  # odometry at the last filter update
+        self.updates = 0
+        self.injected = 0
+
+    # ---------------------------------------------------------------- initialization
+    def set_pose(self, x: float, y: float, theta: float, sigma_xy: float = INIT_SIGMA_XY_M,
+                 sigma_yaw: float = INIT_SIGMA_YAW_RAD) -> None:
+        n = self.n_max
+        self.particles = np.column_stack([
+            self.rng.normal(x, sigma_xy, n), self.rng.normal(y, sigma_xy, n),
+            wrap_angles(self.rng.normal(theta, sigma_yaw, n)),
+        ])
+        self.weights = np.full(n, 1.0 / n)
+        self.w_slow = self.w_fast = 0.0
+
+    def global_localization(self, scan: tuple[np.ndarray, np.ndarray, float] | None = None) -> None:
+        """Spread particles over free space. With a scan, score many candidate poses against it
+        and keep the best ``max_particles`` (each cell's headings sampled evenly)."""
+        if scan is None:
+            self.particles = self.field.random_free_poses(self.n_max, self.rng)
+        else:
+            angles, ranges, range_max = self._subsample(*scan, GLOBAL_BEAMS)
+            m = max(1, GLOBAL_CANDIDATES // GLOBAL_HEADINGS)
+            pos = self.field.random_free_poses(m, self.rng)
+            heads = np.linspace(-math.pi, math.pi, GLOBAL_HEADINGS, endpoint=False)
+            cand = np.repeat(pos, GLOBAL_HEADINGS, axis=0)
+            cand[:, 2] = wrap_angles(np.tile(heads, m) + self.rng.uniform(0, 2 * math.pi / GLOBAL_HEADINGS))
+            scores = np.concatenate([
+                beam_log_likelihood(self.field, chunk, self.sensor, angles, ranges, range_max)
+                for chunk in np.array_split(cand, max(1, len(cand) // 8192))
+            ])
+            self.particles = cand[np.argsort(scores)[-self.n_max:]]
+        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
+        self.w_slow = self.w_fast = 0.0
+        self._odom_ref = None
+
+    # ---------------------------------------------------------------- filtering
+    def _subsample(self, angles: np.ndarray, ranges: np.ndarray, range_max: float,
+                   beams: int) -> tuple[np.ndarray, np.ndarray, float]:
+        ok = np.isfinite(ranges) & (ranges < range_max) & (ranges > 0)
+        idx = np.flatnonzero(ok)
+        if len(idx) > beams:
+            idx = idx[np.linspace(0, len(idx) - 1, beams).astype(int)]
+        return angles[idx].astype(np.float64), ranges[idx].astype(np.float64), range_max
+
+    def moved_enough(self, odom: tuple[float, float, float]) -> bool:
+        if self._odom_ref is None:
+            return True
+        ref = self._odom_ref
+        return (math.hypot(odom[0] - ref[0], odom[1] - ref[1]) >= UPDATE_MIN_D_M
+                or abs(wrap_angle(odom[2] - ref[2])) >= UPDATE_MIN_A_RAD)
+
+    def update(self, odom: tuple[float, float, float], angles: np.ndarray, ranges: np.ndarray,
+               range_max: float, force: bool = False) -> bool:
+        """Motion + measurement + resampling, when the robot moved past AMCL's thresholds (or
+        ``force``). ``odom`` is the odometry pose at the scan. Returns whether it updated."""
+        if self._odom_ref is None:
+            self._odom_ref = odom
+            if not force:
+                return False
+        elif not (force or self.moved_enough(odom)):
+            return False
+        self.particles = sample_odometry(self.particles, self._odom_ref, odom, self.rng)
+        self._odom_ref = odom
+        a, r, rmax = self._subsample(angles, ranges, range_max, self.beams)
+        if len(r) == 0:
+            return False
+        loglik = beam_log_likelihood(self.field, self.particles, self.sensor, a, r, rmax)
+        self._weigh(loglik, len(r))
+        self._resample()
+        self.updates += 1
+        return True
+
+    def _weigh(self, loglik: np.ndarray, n_beams: int) -> None:
+        logw = np.log(np.maximum(self.weights, 1e-300)) + BEAM_TEMPER * loglik
+        logw -= logw.max()
+        w = np.exp(logw)
+        self.weights = w / w.sum()
+        # per-beam average likelihood: comparable across scans with different beam counts
+        w_avg = float(np.mean(np.exp(loglik / n_beams)))
+        if self.w_slow == 0.0:
+            self.w_slow = self.w_fast = w_avg
+        else:
+            self.w_slow += ALPHA_SLOW * (w_avg - self.w_slow)
+            self.w_fast += ALPHA_FAST * (w_avg - self.w_fast)
+
+    def _resample(self) -> None:
+        n_old = len(self.particles)
+        bins = np.floor(np.column_stack([
+            self.particles[:, 0] / KLD_BIN_M, self.particles[:, 1] / KLD_BIN_M,
+            self.particles[:, 2] / KLD_BIN_RAD])).astype(np.int64)
+        k = len(np.unique(bins, axis=0))
+        n = kld_count(k, self.n_min, self.n_max)
+        # low-variance (systematic) resampling
+        positions = (self.rng.random() + np.arange(n)) / n
+        idx = np.minimum(np.searchsorted(np.cumsum(self.weights), positions), n_old - 1)
+        new = self.particles[idx]
+        p_inject = max(0.0, 1.0 - self.w_fast / self.w_slow) if self.w_slow > 0 else 0.0
+        inject = self.rng.random(n) < p_inject
+        if inject.any():
+            new[inject] = self.field.random_free_poses(int(inject.sum()), self.rng)
+            self.injected += int(inject.sum())
+        self.particles = new
+        self.weights = np.full(n, 1.0 / n)
+
+    # ---------------------------------------------------------------- output
+    def estimate(self) -> Estimate:
+        w = self.weights
+        x = float(np.dot(w, self.particles[:, 0]))
+        y = float(np.dot(w, self.particles[:, 1]))
+        cs = float(np.dot(w, np.cos(self.particles[:, 2])))
+        sn = float(np.dot(w, np.sin(self.particles[:, 2])))
+        theta = math.atan2(sn, cs)
+        d = self.particles - np.array([x, y, theta])
+        d[:, 2] = wrap_angles(d[:, 2])
+        cov = (d * w[:, None]).T @ d
+        return Estimate(x, y, theta, tuple(float(v) for v in cov.ravel()))
+
+    def pose_at(self, odom: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The estimate carried forward by the odometry since the last filter update."""
+        e = self.estimate()
+        if self._odom_ref is None:
+            return (e.x, e.y, e.theta)
+        return compose((e.x, e.y, e.theta), relative(self._odom_ref, odom))
+
+    @property
+    def count(self) -> int:
+        return len(self.particles)
+
+
+def scan_fit(field: LikelihoodField, pose: tuple[float, float, float], sensor: tuple[float, float, float],
+             angles: np.ndarray, ranges: np.ndarray, range_max: float, tolerance_m: float) -> float:
+    """Localization health: the fraction (0..1) of the scan's returns that land within
+    ``tolerance_m`` of a mapped obstacle when the scan is placed at ``pose``. People and
+    clutter lower it a little; a wrong pose lowers it a lot. NaN when there are no returns."""
+    ok = np.isfinite(ranges) & (ranges > 0) & (ranges < range_max)
+    if not ok.any():
+        return float("nan")
+    sx, sy, st = sensor
+    x, y, t = pose
+    c, s = math.cos(t), math.sin(t)
+    ox, oy = x + c * sx - s * sy, y + s * sx + c * sy
+    a = t + st + angles[ok]
+    d = field.distances(ox + ranges[ok] * np.cos(a), oy + ranges[ok] * np.sin(a))
+    return float(np.mean(d <= tolerance_m))

@@ -1,0 +1,159 @@
+"""Regulated Pure Pursuit (Macenski et al. 2023; Nav2's ``RegulatedPurePursuitController``).
+
+Each step: prune the path behind the robot, pick the carrot ``lookahead_m`` ahead, and
+steer on the arc through it (curvature ``2 y / L²`` in the robot frame). The speed is
+then regulated: down on tight curves (radius below ``REGULATED_MIN_RADIUS_M``), near
+obstacles (closer than ``COST_SCALING_DIST_M``), near the goal, and to the speed-zone
+limit. When the carrot is too far off to the side the robot rotates in place. The arc
+is checked ``COLLISION_HORIZON_S`` ahead on the costmap; a collision means stop and
+report ``blocked``. The forward speed is never negative (the seed's robot never reverses).
+
+Conventions: map frame, metres, radians; the path is an (N, 2) array of (x, y).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sage_robot.core.geometry import wrap_angle
+from sage_robot.nav.costmap import Costmap
+
+REGULATED_MIN_RADIUS_M = 0.9  # regulated_linear_scaling_min_radius
+COST_SCALING_DIST_M = 0.6  # slow down when an obstacle is nearer than this
+COST_SCALING_GAIN = 1.0
+MIN_REGULATED_SPEED_MPS = 0.15  # regulated_linear_scaling_min_speed
+APPROACH_DIST_M = 0.6  # approach_velocity_scaling_dist: slow down over the last metres
+MIN_APPROACH_SPEED_MPS = 0.05
+ROTATE_TO_HEADING_MIN_ANGLE_RAD = 0.785  # rotate in place when the carrot is further off than this
+ROTATE_SPEED_RADPS = 0.8  # rotate_to_heading_angular_vel
+COLLISION_HORIZON_S = 1.0  # max_allowed_time_to_collision_up_to_carrot
+COLLISION_STEP_M = 0.05
+MIN_COLLISION_CHECK_M = 0.5  # look at least this far ahead, however slow the command
+MIN_LOOKAHEAD_M = 0.3
+
+
+@dataclass(frozen=True)
+class Command:
+    """A velocity command and why. ``blocked`` means the arc ahead runs into an obstacle."""
+
+    v: float  # m/s, >= 0
+    w: float  # rad/s, counter-clockwise
+    blocked: bool = False
+    arrived: bool = False
+    rotating: bool = False
+
+
+@dataclass(frozen=True)
+class ControllerParams:
+    max_v: float = 0.8
+    max_w: float = 1.0
+    lookahead_m: float = 1.2
+    xy_tolerance_m: float = 0.25
+    yaw_tolerance_rad: float = 0.25
+
+
+class PurePursuit:
+    """Follows one path. Stateful only in where along the path the robot last was."""
+
+    def __init__(self, path: np.ndarray, params: ControllerParams, goal_yaw: float | None = None) -> None:
+        if len(path) == 0:
+            raise ValueError("empty path")
+        self.path = np.asarray(path, dtype=np.float64)
+        self.params = params
+        self.goal_yaw = goal_yaw
+        self._i = 0  # index of the closest path point so far
+        self._at_goal_xy = False
+
+    def remaining_m(self) -> float:
+        seg = self.path[self._i:]
+        return float(np.hypot(*np.diff(seg, axis=0).T).sum()) if len(seg) > 1 else 0.0
+
+    def _prune(self, x: float, y: float) -> None:
+        window = self.path[self._i:self._i + 200]
+        d = np.hypot(window[:, 0] - x, window[:, 1] - y)
+        self._i += int(np.argmin(d))
+
+    def _carrot(self, x: float, y: float, lookahead: float) -> np.ndarray:
+        rest = self.path[self._i:]
+        d = np.hypot(rest[:, 0] - x, rest[:, 1] - y)
+        beyond = np.flatnonzero(d >= lookahead)
+        return rest[beyond[0]] if len(beyond) else rest[-1]
+
+    def step(self, pose: tuple[float, float, float], costmap: Costmap | None = None) -> Command:
+        """One control step at ``pose`` (map frame)."""
+        p = self.params
+        x, y, th = pose
+        self._prune(x, y)
+        goal = self.path[-1]
+        dist_goal = math.hypot(goal[0] - x, goal[1] - y)
+        if self._at_goal_xy or dist_goal <= p.xy_tolerance_m:
+            self._at_goal_xy = True
+            return self._align(th)
+        carrot = self._carrot(x, y, max(MIN_LOOKAHEAD_M, min(p.lookahead_m, dist_goal)))
+        dx, dy = carrot[0] - x, carrot[1] - y
+        c, s = math.cos(th), math.sin(th)
+        lx, ly = c * dx + s * dy, -s * dx + c * dy
+        angle = math.atan2(ly, lx)
+        if abs(angle) > ROTATE_TO_HEADING_MIN_ANGLE_RAD:
+            # a round robot can always turn where it stands
+            return Command(0.0, math.copysign(min(ROTATE_SPEED_RADPS, p.max_w), angle), rotating=True)
+        l2 = lx * lx + ly * ly
+        curvature = 2.0 * ly / l2 if l2 > 1e-9 else 0.0
+        v = self._regulate(p.max_v, curvature, dist_goal, pose, costmap)
+        w = v * curvature
+        if abs(w) > p.max_w:  # keep the arc, slow down
+            v *= p.max_w / abs(w)
+            w = math.copysign(p.max_w, w)
+        v = max(0.0, v)  # never reverse
+        if costmap is not None and self._collides(pose, v, w, costmap):
+            return Command(0.0, 0.0, blocked=True)
+        return Command(v, w)
+
+    def _align(self, th: float) -> Command:
+        if self.goal_yaw is None:
+            return Command(0.0, 0.0, arrived=True)
+        err = wrap_angle(self.goal_yaw - th)
+        if abs(err) <= self.params.yaw_tolerance_rad:
+            return Command(0.0, 0.0, arrived=True)
+        w = math.copysign(min(ROTATE_SPEED_RADPS, self.params.max_w, max(0.3, abs(err))), err)
+        return Command(0.0, w, rotating=True)
+
+    def _regulate(self, v: float, curvature: float, dist_goal: float, pose: tuple[float, float, float],
+                  costmap: Costmap | None) -> float:
+        if abs(curvature) > 1e-9 and 1.0 / abs(curvature) < REGULATED_MIN_RADIUS_M:
+            v *= (1.0 / abs(curvature)) / REGULATED_MIN_RADIUS_M
+        if costmap is not None:
+            d = costmap.distance_at(pose[0], pose[1]) - costmap.inscribed_m
+            if d < COST_SCALING_DIST_M:
+                v *= COST_SCALING_GAIN * max(d, 0.0) / COST_SCALING_DIST_M
+        v = max(v, MIN_REGULATED_SPEED_MPS)
+        if dist_goal < APPROACH_DIST_M:
+            v = min(v, max(MIN_APPROACH_SPEED_MPS, self.params.max_v * dist_goal / APPROACH_DIST_M))
+        if costmap is not None:
+            v = min(v, self.params.max_v * costmap.speed_limit_at(pose[0], pose[1]))
+        return v
+
+    def _collides(self, pose: tuple[float, float, float], v: float, w: float, costmap: Costmap) -> bool:
+        """Simulate the arc for COLLISION_HORIZON_S. A point in collision counts unless the robot
+        is already that close to an obstacle and the arc takes it no closer (leaving a wall)."""
+        if v <= 1e-6:
+            return False
+        x, y, th = pose
+        here = costmap.distance_at(x, y)
+        dt = COLLISION_STEP_M / v
+        n = max(1, int(max(COLLISION_HORIZON_S * v, MIN_COLLISION_CHECK_M) / COLLISION_STEP_M))
+        pts = []
+        for _ in range(n):
+            th += w * dt
+            x += v * math.cos(th) * dt
+            y += v * math.sin(th) * dt
+            pts.append((x, y))
+        arr = np.array(pts)
+        hit = costmap.blocked(arr)
+        if not hit.any():
+            return False
+        closer = np.array([costmap.distance_at(px, py) < here - 1e-3 for px, py in arr[hit]])
+        return bool(closer.any() or here > costmap.inscribed_m)

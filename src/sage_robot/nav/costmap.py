@@ -1,0 +1,243 @@
+"""Costmaps as Nav2 builds them: static, obstacle (mark + ray-trace clear), keepout and
+inflation layers, plus a speed-limit layer. Pure numpy/scipy.
+
+Conventions
+- Arrays are indexed ``[row, col]``; row 0 is the map origin's y (the bottom), as
+  :class:`~sage_robot.core.msgs.OccupancyGrid`. A cell's centre is at
+  ``origin + (col + 0.5, row + 0.5) * resolution`` (the map's yaw must be 0).
+- Costs are Nav2's ``uint8`` scale: 0 free … 252 inflated, 253 inscribed (the robot's
+  centre here means touching), 254 lethal, 255 unknown.
+- Inflation (Nav2 ``InflationLayer``): at distance ``d`` from the nearest lethal cell,
+  ``d <= inscribed``: 253; ``d <= inflation_radius``: ``252 * exp(-k (d - inscribed))``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from sage_robot.core.msgs import OccupancyGrid
+
+FREE_SPACE = 0
+MAX_NON_OBSTACLE = 252
+INSCRIBED = 253
+LETHAL = 254
+NO_INFORMATION = 255
+OCCUPIED_MIN = 65  # map cell value (0..100) from which a cell is an obstacle (map_saver's)
+OBSTACLE_RANGE_M = 5.0  # Nav2 obstacle_max_range: beams beyond this mark nothing
+RAYTRACE_RANGE_M = 6.0  # Nav2 raytrace_max_range: free space is cleared up to here
+NO_SPEED_LIMIT = 1.0
+
+
+@dataclass(frozen=True)
+class GridGeometry:
+    """Where a grid lies: ``origin_x/y`` (m) of cell (0, 0)'s lower-left corner, ``resolution`` (m)."""
+
+    origin_x: float
+    origin_y: float
+    resolution: float
+    shape: tuple[int, int]  # rows, cols
+
+    @classmethod
+    def of(cls, grid: OccupancyGrid) -> GridGeometry:
+        if abs(grid.origin.theta) > 1e-6:
+            raise ValueError("costmaps need a map whose origin yaw is 0")
+        return cls(grid.origin.x, grid.origin.y, grid.resolution, grid.data.shape)  # type: ignore[arg-type]
+
+    def to_cell(self, x: np.ndarray | float, y: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """World (m) → (row, col) int arrays; may fall outside the grid."""
+        col = np.floor((np.asarray(x, dtype=np.float64) - self.origin_x) / self.resolution).astype(np.int64)
+        row = np.floor((np.asarray(y, dtype=np.float64) - self.origin_y) / self.resolution).astype(np.int64)
+        return row, col
+
+    def to_world(self, row: np.ndarray | float, col: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """(row, col) → the cell centre in the world (m)."""
+        x = self.origin_x + (np.asarray(col, dtype=np.float64) + 0.5) * self.resolution
+        y = self.origin_y + (np.asarray(row, dtype=np.float64) + 0.5) * self.resolution
+        return x, y
+
+    def inside(self, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        return (row >= 0) & (row < self.shape[0]) & (col >= 0) & (col < self.shape[1])
+
+
+def inflate(lethal: np.ndarray, resolution: float, inscribed_m: float, inflation_m: float,
+            cost_scaling: float) -> tuple[np.ndarray, np.ndarray]:
+    """Nav2 inflation of a boolean lethal mask → (uint8 costs, distance to nearest lethal in m)."""
+    if lethal.any():
+        dist = ndimage.distance_transform_edt(~lethal).astype(np.float32) * resolution
+    else:
+        dist = np.full(lethal.shape, np.inf, dtype=np.float32)
+    cost = np.zeros(lethal.shape, dtype=np.uint8)
+    ring = (dist > inscribed_m) & (dist <= inflation_m)
+    cost[ring] = (MAX_NON_OBSTACLE * np.exp(-cost_scaling * (dist[ring] - inscribed_m))).astype(np.uint8)
+    cost[(dist <= inscribed_m) & ~lethal] = INSCRIBED
+    cost[lethal] = LETHAL
+    return cost, dist
+
+
+def resample_mask(mask: OccupancyGrid, geom: GridGeometry, fill: int = -1) -> np.ndarray:
+    """A Nav2 filter mask read onto ``geom``'s cells (nearest cell; outside → ``fill``)."""
+    rows, cols = np.indices(geom.shape)
+    x, y = geom.to_world(rows, cols)
+    mg = GridGeometry.of(mask)
+    r, c = mg.to_cell(x, y)
+    ok = mg.inside(r, c)
+    out = np.full(geom.shape, fill, dtype=np.int16)
+    out[ok] = mask.data[r[ok], c[ok]]
+    return out
+
+
+def speed_limits_from_mask(values: np.ndarray) -> np.ndarray:
+    """Nav2 SpeedFilter, percentage type (base 0, multiplier 1): a mask value v in 1..100 limits
+    the speed to v % of the maximum; 0 and unknown (-1) mean no limit. → fraction 0..1."""
+    frac = np.full(values.shape, NO_SPEED_LIMIT, dtype=np.float32)
+    limited = (values > 0) & (values <= 100)
+    frac[limited] = values[limited] / 100.0
+    return frac
+
+
+class Costmap:
+    """A layered costmap over one grid.
+
+    Layers: ``static`` (walls from the map), ``obstacles`` (marked from scans, cleared by
+    ray tracing), ``keepout`` (never enter). ``cost`` is the combined, inflated uint8 grid;
+    ``dist`` the distance (m) to the nearest lethal cell; ``speed`` the speed-limit fraction.
+    """
+
+    def __init__(self, geom: GridGeometry, static: np.ndarray, unknown: np.ndarray,
+                 inscribed_m: float, inflation_m: float, cost_scaling: float,
+                 keepout: np.ndarray | None = None, speed: np.ndarray | None = None) -> None:
+        self.geom = geom
+        self.inscribed_m, self.inflation_m, self.cost_scaling = inscribed_m, inflation_m, cost_scaling
+        self.static = static.astype(bool)
+        self.unknown = unknown.astype(bool)
+        self.keepout = np.zeros(geom.shape, bool) if keepout is None else keepout.astype(bool)
+        self.speed = np.full(geom.shape, NO_SPEED_LIMIT, np.float32) if speed is None else speed
+        self.obstacles = np.zeros(geom.shape, dtype=bool)
+        base = self.static | self.keepout
+        self._base_cost, self._base_dist = inflate(base, geom.resolution, inscribed_m, inflation_m,
+                                                   cost_scaling)
+        self._base_cost[self.unknown & (self._base_cost < LETHAL)] = NO_INFORMATION
+        self.cost = self._base_cost.copy()
+        self.dist = self._base_dist.copy()
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def from_grid(cls, grid: OccupancyGrid, inscribed_m: float, inflation_m: float,
+                  cost_scaling: float, keepout_mask: OccupancyGrid | None = None,
+                  speed_mask: OccupancyGrid | None = None) -> Costmap:
+        geom = GridGeometry.of(grid)
+        static = grid.data >= OCCUPIED_MIN
+        unknown = grid.data < 0
+        keepout = None
+        if keepout_mask is not None:
+            k = resample_mask(keepout_mask, geom, fill=0)
+            keepout = k >= OCCUPIED_MIN
+        speed = None
+        if speed_mask is not None:
+            speed = speed_limits_from_mask(resample_mask(speed_mask, geom, fill=-1))
+        return cls(geom, static, unknown, inscribed_m, inflation_m, cost_scaling, keepout, speed)
+
+    def window(self, cx: float, cy: float, size_m: float) -> Costmap:
+        """A rolling local costmap: the square of side ``size_m`` centred on (cx, cy), static and
+        keepout layers copied, obstacle layer empty (the local costmap marks only live scans)."""
+        g, n = self.geom, max(3, round(size_m / self.geom.resolution))
+        rc = g.to_cell(cx - size_m / 2, cy - size_m / 2)
+        r0, c0 = int(rc[0]), int(rc[1])
+        geom = GridGeometry(g.origin_x + c0 * g.resolution, g.origin_y + r0 * g.resolution,
+                            g.resolution, (n, n))
+
+        def cut(a: np.ndarray, fill: float) -> np.ndarray:
+            out = np.full((n, n), fill, dtype=a.dtype)
+            rs, cs = slice(max(r0, 0), min(r0 + n, g.shape[0])), slice(max(c0, 0), min(c0 + n, g.shape[1]))
+            if rs.start < rs.stop and cs.start < cs.stop:
+                out[rs.start - r0:rs.stop - r0, cs.start - c0:cs.stop - c0] = a[rs, cs]
+            return out
+
+        return Costmap(geom, cut(self.static, True), cut(self.unknown, True), self.inscribed_m,
+                       self.inflation_m, self.cost_scaling, cut(self.keepout, False),
+                       cut(self.speed, NO_SPEED_LIMIT))
+
+    # ------------------------------------------------------------------ obstacle layer
+    def update_scan(self, sensor_pose: tuple[float, float, float], angles: np.ndarray,
+                    ranges: np.ndarray, range_max: float) -> None:
+        """Clear cells along each beam (up to RAYTRACE_RANGE_M), then mark the hit cells of beams
+        shorter than OBSTACLE_RANGE_M. ``sensor_pose`` is the lidar's (x, y, yaw) in this map's
+        frame; ``angles`` (rad, sensor frame) and ``ranges`` (m; inf = no return)."""
+        sx, sy, st = sensor_pose
+        r = np.asarray(ranges, dtype=np.float64)
+        finite = np.isfinite(r) & (r > 0)
+        clear_len = np.where(finite, np.minimum(r, RAYTRACE_RANGE_M), min(range_max, RAYTRACE_RANGE_M))
+        a = np.asarray(angles, dtype=np.float64) + st
+        ca, sa = np.cos(a), np.sin(a)
+        step = self.geom.resolution * 0.5
+        n_steps = math.ceil(clear_len.max() / step) if len(clear_len) else 0
+        if n_steps:
+            t = np.arange(n_steps) * step
+            # stop one cell short of the hit so the wall itself is never cleared
+            keep = t[None, :] < (clear_len[:, None] - self.geom.resolution)
+            px = sx + ca[:, None] * t[None, :]
+            py = sy + sa[:, None] * t[None, :]
+            rows, cols = self.geom.to_cell(px[keep], py[keep])
+            ok = self.geom.inside(rows, cols)
+            self.obstacles[rows[ok], cols[ok]] = False
+        mark = finite & (r < OBSTACLE_RANGE_M)
+        hr, hc = self.geom.to_cell(sx + ca[mark] * r[mark], sy + sa[mark] * r[mark])
+        ok = self.geom.inside(hr, hc)
+        self.obstacles[hr[ok], hc[ok]] = True
+        self.obstacles &= ~self.static  # walls belong to the static layer
+        self.refresh()
+
+    def clear_obstacles(self) -> None:
+        """Nav2's clear-costmap recovery: forget everything the scans marked."""
+        self.obstacles[:] = False
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Recombine the layers. Only the bounding box of the obstacles (plus the inflation
+        radius) is re-inflated, so a large map with a few people costs little."""
+        self.cost = self._base_cost.copy()
+        self.dist = self._base_dist.copy()
+        if not self.obstacles.any():
+            return
+        rr, cc = np.nonzero(self.obstacles)
+        pad = math.ceil(self.inflation_m / self.geom.resolution) + 1
+        r0, r1 = max(rr.min() - pad, 0), min(rr.max() + pad + 1, self.geom.shape[0])
+        c0, c1 = max(cc.min() - pad, 0), min(cc.max() + pad + 1, self.geom.shape[1])
+        lethal = self.obstacles[r0:r1, c0:c1]
+        cost, dist = inflate(lethal, self.geom.resolution, self.inscribed_m, self.inflation_m,
+                             self.cost_scaling)
+        self.cost[r0:r1, c0:c1] = np.maximum(self.cost[r0:r1, c0:c1], cost)
+        self.dist[r0:r1, c0:c1] = np.minimum(self.dist[r0:r1, c0:c1], dist)
+
+    # ------------------------------------------------------------------ queries
+    def cost_at(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
+        """Cost at world points; outside the grid is NO_INFORMATION."""
+        r, c = self.geom.to_cell(x, y)
+        ok = self.geom.inside(r, c)
+        out = np.full(np.shape(r), NO_INFORMATION, dtype=np.uint8)
+        out[ok] = self.cost[r[ok], c[ok]]
+        return out
+
+    def distance_at(self, x: float, y: float) -> float:
+        """Distance (m) from a point to the nearest lethal cell (0 outside the grid)."""
+        r, c = self.geom.to_cell(x, y)
+        if not bool(self.geom.inside(r, c)):
+            return 0.0
+        return float(self.dist[int(r), int(c)])
+
+    def speed_limit_at(self, x: float, y: float) -> float:
+        """Speed-limit fraction (0..1] at a point; 1 = no limit."""
+        r, c = self.geom.to_cell(x, y)
+        if not bool(self.geom.inside(r, c)):
+            return NO_SPEED_LIMIT
+        return float(self.speed[int(r), int(c)])
+
+    def blocked(self, xy: np.ndarray) -> np.ndarray:
+        """Which (N, 2) points put the robot in collision (inscribed, lethal or unknown)."""
+        if len(xy) == 0:
+            return np.zeros(0, dtype=bool)
+        return self.cost_at(xy[:, 0], xy[:, 1]) >= INSCRIBED

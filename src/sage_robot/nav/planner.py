@@ -1,0 +1,179 @@
+"""Global planner: cost-aware shortest path on the inflated costmap, then smoothed.
+
+The search runs in compiled code: ``pyastar2d`` (A* in C++, 8-connected) when it is
+installed, else scikit-image's ``graph.MCP_Geometric`` (Dijkstra in Cython). A cell's
+step weight is ``1 + COST_WEIGHT * cost / 252`` (NavFn's cost-aware metric); cells at or
+above ``INSCRIBED`` cannot be entered. Large maps are searched on a coarser grid (each
+planning cell takes the *highest* cost of the fine cells it covers, so a coarse path never
+crosses a wall the fine map has) and the result is smoothed on the fine costmap.
+
+Conventions: paths are (N, 2) float arrays of map-frame (x, y) in metres; grid axes as in
+:mod:`sage_robot.nav.costmap`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sage_robot.nav.costmap import INSCRIBED, MAX_NON_OBSTACLE, Costmap
+
+COST_WEIGHT = 3.0  # extra step weight at cost 252 (so the path keeps off walls)
+MAX_FINE_CELLS = 400_000  # above this many cells, plan on a coarser grid
+PATH_SPACING_M = 0.05  # spacing of the returned path's points (m)
+SMOOTH_ITERATIONS = 2  # line-of-sight shortcut passes
+GOAL_SEARCH_RADIUS_M = 0.3  # a goal inside an inflated cell moves to the nearest free one within this
+
+
+class NoPath(Exception):
+    """No collision-free path; the message says why, for a person."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    points: np.ndarray  # (N, 2) map-frame x, y (m)
+    length_m: float
+
+
+def _astar_backend() -> object | None:
+    try:
+        import pyastar2d  # type: ignore[import-not-found, unused-ignore]
+    except ImportError:
+        return None
+    return pyastar2d
+
+
+def _pool_max(cost: np.ndarray, f: int) -> np.ndarray:
+    """Max-pool ``cost`` by ``f`` (pads with the unknown cost)."""
+    if f == 1:
+        return cost
+    rows, cols = cost.shape
+    pr, pc = -rows % f, -cols % f
+    padded = np.pad(cost, ((0, pr), (0, pc)), constant_values=255)
+    return padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).max(axis=(1, 3))
+
+
+def weights_from_cost(cost: np.ndarray) -> np.ndarray:
+    w = 1.0 + COST_WEIGHT * np.minimum(cost, MAX_NON_OBSTACLE).astype(np.float32) / MAX_NON_OBSTACLE
+    w[cost >= INSCRIBED] = np.inf
+    return w.astype(np.float32)
+
+
+def _nearest_free(weights: np.ndarray, cell: tuple[int, int], radius: int) -> tuple[int, int] | None:
+    r, c = cell
+    if 0 <= r < weights.shape[0] and 0 <= c < weights.shape[1] and np.isfinite(weights[r, c]):
+        return cell
+    best, best_d = None, math.inf
+    for dr in range(-radius, radius + 1):
+        for dc in range(-radius, radius + 1):
+            rr, cc = r + dr, c + dc
+            if 0 <= rr < weights.shape[0] and 0 <= cc < weights.shape[1] and np.isfinite(weights[rr, cc]):
+                d = dr * dr + dc * dc
+                if d < best_d:
+                    best, best_d = (rr, cc), d
+    return best
+
+
+def _search(weights: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> np.ndarray | None:
+    astar = _astar_backend()
+    if astar is not None:
+        path = astar.astar_path(weights, start, goal, allow_diagonal=True)  # type: ignore[attr-defined]
+        return None if path is None else np.asarray(path)
+    from skimage.graph import MCP_Geometric
+
+    mcp = MCP_Geometric(np.where(np.isfinite(weights), weights, -1.0))
+    costs, _ = mcp.find_costs([start], [goal])
+    if not np.isfinite(costs[goal]):
+        return None
+    return np.asarray(mcp.traceback(goal))
+
+
+def _line_free(costmap: Costmap, a: np.ndarray, b: np.ndarray, limit: int) -> bool:
+    n = max(2, int(np.hypot(*(b - a)) / (costmap.geom.resolution * 0.5)) + 1)
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    pts = a + (b - a) * t
+    return bool((costmap.cost_at(pts[:, 0], pts[:, 1]) < limit).all())
+
+
+def smooth(points: np.ndarray, costmap: Costmap) -> np.ndarray:
+    """Shortcut the grid path where a straight line stays in cells no costlier than the ones the
+    path already crosses (so it does not cut closer to walls), then resample evenly."""
+    if len(points) < 3:
+        return resample(points, PATH_SPACING_M)
+    out = points
+    for _ in range(SMOOTH_ITERATIONS):
+        costs = costmap.cost_at(out[:, 0], out[:, 1]).astype(np.int32)
+        keep = [0]
+        i = 0
+        while i < len(out) - 1:
+            j = len(out) - 1
+            step = max(1, (len(out) - i) // 2)
+            # furthest visible point, probed coarsely then linearly
+            while j > i + 1:
+                limit = int(max(costs[i:j + 1].max(), 1)) + 1
+                if _line_free(costmap, out[i], out[j], limit):
+                    break
+                j = max(i + 1, j - step)
+                step = max(1, step // 2)
+            keep.append(j)
+            i = j
+        out = out[keep]
+    return resample(out, PATH_SPACING_M)
+
+
+def resample(points: np.ndarray, spacing: float) -> np.ndarray:
+    if len(points) < 2:
+        return points.astype(np.float64)
+    seg = np.hypot(*np.diff(points, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if s[-1] <= 0:
+        return points[:1].astype(np.float64)
+    n = max(2, math.ceil(s[-1] / spacing) + 1)
+    t = np.linspace(0.0, s[-1], n)
+    return np.column_stack([np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])])
+
+
+def path_length(points: np.ndarray) -> float:
+    return float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
+
+
+def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float],
+         max_cells: int = MAX_FINE_CELLS) -> Plan:
+    """A smoothed path from ``start`` to ``goal`` (map frame, m). Raises :class:`NoPath`."""
+    g = costmap.geom
+    factor = max(1, math.ceil(math.sqrt(g.shape[0] * g.shape[1] / max_cells)))
+    cost = _pool_max(costmap.cost, factor)
+    weights = weights_from_cost(cost)
+    res = g.resolution * factor
+    radius = max(1, round(GOAL_SEARCH_RADIUS_M / res))
+
+    def cell(p: tuple[float, float]) -> tuple[int, int]:
+        return (int((p[1] - g.origin_y) // res), int((p[0] - g.origin_x) // res))
+
+    s = _nearest_free(weights, cell(start), radius + 1)
+    if s is None:
+        raise NoPath("the robot is boxed in where it stands")
+    gl = _nearest_free(weights, cell(goal), radius)
+    if gl is None:
+        raise NoPath("the goal is inside an obstacle or outside the map")
+    cells = _search(weights, s, gl)
+    if cells is None:
+        raise NoPath("no free way to the goal")
+    xs = g.origin_x + (cells[:, 1] + 0.5) * res
+    ys = g.origin_y + (cells[:, 0] + 0.5) * res
+    pts = np.column_stack([xs, ys])
+    pts[0] = start
+    if math.hypot(goal[0] - pts[-1, 0], goal[1] - pts[-1, 1]) <= GOAL_SEARCH_RADIUS_M + res:
+        pts[-1] = goal
+    pts = smooth(pts, costmap)
+    return Plan(pts, path_length(pts))
+
+
+def path_blocked(costmap: Costmap, points: np.ndarray, ahead_m: float) -> bool:
+    """Whether the first ``ahead_m`` of a path runs into a lethal/inscribed cell."""
+    if len(points) == 0:
+        return False
+    n = max(1, int(ahead_m / PATH_SPACING_M))
+    return bool(costmap.blocked(points[:n]).any())

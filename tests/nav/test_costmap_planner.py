@@ -1,0 +1,114 @@
+"""Costmap layers, inflation, masks and the planner on hand-drawn grids and real maps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from nav_grids import draw, room
+
+from sage_robot.core.mapio import read_map
+from sage_robot.nav.costmap import INSCRIBED, LETHAL, MAX_NON_OBSTACLE, NO_INFORMATION, Costmap, inflate
+from sage_robot.nav.planner import NoPath, path_length, plan
+
+CORRIDOR = """
+####################
+#..................#
+#..................#
+#########..#########
+#..................#
+#..................#
+####################
+"""
+
+
+def test_inflation_follows_nav2_decay() -> None:
+    lethal = np.zeros((1, 40), dtype=bool)
+    lethal[0, 0] = True
+    cost, _dist = inflate(lethal, 0.05, 0.25, 0.55, 3.0)
+    assert cost[0, 0] == LETHAL
+    assert (cost[0, 1:6] == INSCRIBED).all()  # 0.05 .. 0.25 m: inscribed
+    d = 0.40
+    i = round(d / 0.05)
+    assert cost[0, i] == int(MAX_NON_OBSTACLE * math.exp(-3.0 * (d - 0.25)))
+    assert cost[0, 12] == 0  # 0.60 m > inflation radius
+    assert np.all(np.diff(cost[0, 5:12].astype(int)) <= 0)  # decays outward
+
+
+def test_unknown_space_is_not_free() -> None:
+    cm = Costmap.from_grid(draw("#####\n#.?.#\n#####", 1.0), 0.25, 0.55, 3.0)
+    assert cm.cost[1, 2] == NO_INFORMATION
+
+
+def test_obstacle_layer_marks_and_raytrace_clears() -> None:
+    cm = Costmap.from_grid(room(6.0, 4.0), 0.25, 0.55, 3.0)
+    angles = np.array([0.0])
+    cm.update_scan((1.0, 2.0, 0.0), angles, np.array([2.0]), 12.0)  # a person at (3, 2)
+    assert cm.cost_at(3.0, 2.0)[()] == LETHAL
+    assert cm.cost_at(3.0, 2.6)[()] < INSCRIBED  # 0.6 m to the side: passable
+    # the person walks away: the beam now reaches the far wall and clears their cell
+    cm.update_scan((1.0, 2.0, 0.0), angles, np.array([4.95]), 12.0)
+    assert cm.cost_at(3.0, 2.0)[()] == 0
+    assert cm.cost_at(5.99, 2.0)[()] == LETHAL  # the wall stays
+
+
+def test_clear_obstacles() -> None:
+    cm = Costmap.from_grid(room(6.0, 4.0), 0.25, 0.55, 3.0)
+    cm.update_scan((1.0, 2.0, 0.0), np.array([0.0, 0.1]), np.array([2.0, 2.0]), 12.0)
+    assert cm.obstacles.any()
+    cm.clear_obstacles()
+    assert not cm.obstacles.any()
+    assert cm.cost_at(3.0, 2.0)[()] == 0
+
+
+def test_plan_through_door_keeps_off_walls() -> None:
+    cm = Costmap.from_grid(draw(CORRIDOR, 0.1, scale=5), 0.25, 0.55, 3.0)
+    p = plan(cm, (1.0, 2.5), (9.0, 1.0))
+    assert np.allclose(p.points[0], (1.0, 2.5)) and np.allclose(p.points[-1], (9.0, 1.0))
+    assert (cm.cost_at(p.points[:, 0], p.points[:, 1]) < INSCRIBED).all()
+    steps = np.hypot(*np.diff(p.points, axis=0).T)
+    assert steps.max() < 0.06  # evenly resampled
+    straight = math.hypot(9.0 - 1.0, 1.0 - 2.5)
+    assert straight <= p.length_m < 2.0 * straight
+
+
+def test_plan_blocked_raises_with_reason() -> None:
+    walled = CORRIDOR.replace("#########..#########", "####################")
+    cm = Costmap.from_grid(draw(walled, 0.1, scale=5), 0.25, 0.55, 3.0)
+    with pytest.raises(NoPath, match="no free way"):
+        plan(cm, (1.0, 2.5), (9.0, 1.0))
+
+
+def test_plan_on_coarse_grid_never_crosses_walls(shared_data) -> None:
+    grid = read_map(shared_data("maps/willow-full/willow-full.yaml"))
+    cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0)
+    free = np.argwhere(cm.cost == 0)
+    rng = np.random.default_rng(3)
+    done = 0
+    for _ in range(12):
+        a, b = free[rng.integers(len(free), size=2)]
+        s, g = cm.geom.to_world(*a), cm.geom.to_world(*b)
+        try:
+            p = plan(cm, (float(s[0]), float(s[1])), (float(g[0]), float(g[1])), max_cells=50_000)
+        except NoPath:
+            continue
+        done += 1
+        assert (cm.cost_at(p.points[:, 0], p.points[:, 1]) < LETHAL).all()
+        assert p.length_m >= math.dist(s, g) - 1e-6
+        assert path_length(p.points) == pytest.approx(p.length_m)
+    assert done >= 3
+
+
+def test_keepout_and_speed_masks_from_nav2(shared_data) -> None:
+    base = "maps/nav2-depot/"
+    grid = read_map(shared_data(base + "depot.yaml"))
+    keep = read_map(shared_data(base + "depot_keepout.yaml"))
+    speed = read_map(shared_data(base + "depot_speed.yaml"))
+    cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0, keep, speed)
+    zone = keep.data >= 65
+    assert zone.any() and (cm.cost[zone] == LETHAL).all()
+    limited = (speed.data > 0) & (speed.data <= 100)
+    assert limited.any()
+    assert np.allclose(cm.speed[limited], speed.data[limited] / 100.0)
+    assert (cm.speed[speed.data == 0] == 1.0).all()
