@@ -8,16 +8,28 @@ from __future__ import annotations
 
 PROFILES: dict[str, list[tuple[str, bool]]] = {
     # The whole system on the simulated robot in the simulated building.
-    "sim": [("mcu_sim", True), ("heartbeat", False), ("battery_watchdog", False), ("serial_bridge", True), ("web", True)],
+    "sim": [
+        ("mcu_sim", True),
+        ("heartbeat", False),
+        ("battery_watchdog", False),
+        ("foxglove", False),
+        ("serial_bridge", True),
+        ("web", True),
+        ("kb", False),
+        ("brain", False),
+    ],
     # The real robot on a tour (the seed's start_robot.sh).
     "tour": [
         ("heartbeat", False),
         ("battery_watchdog", False),
+        ("foxglove", False),
         ("lidar", False),
         ("camera", False),
         ("serial_bridge", True),
         ("web", True),
+        ("kb", False),
+        ("brain", False),
     ],
     # The real robot building a map (the seed's slam_robot.sh).
-    "slam": [("heartbeat", False), ("lidar", False), ("camera", False)],
+    "slam": [("heartbeat", False), ("foxglove", False), ("lidar", False), ("camera", False), ("web", True)],
 }

@@ -10,12 +10,17 @@ from sage_robot.core.node import Node
 
 NODES: dict[str, str] = {
     "heartbeat": "sage_robot.app.builtin:HeartbeatNode",
+    "kb": "sage_robot.kb.node:KbNode",
     "battery_watchdog": "sage_robot.app.battery_watchdog:BatteryWatchdogNode",
     "lidar": "sage_robot.hardware.rplidar.node:LidarNode",
     "camera": "sage_robot.hardware.camera:CameraNode",
+    "recorder": "sage_robot.app.recording.nodes:RecorderNode",
+    "replay": "sage_robot.app.recording.nodes:ReplayNode",
+    "foxglove": "sage_robot.app.recording.nodes:FoxgloveNode",
     "mcu_sim": "sage_robot.sim.mcu_pty:McuSimNode",
     "serial_bridge": "sage_robot.hardware.mcu.bridge:SerialBridgeNode",
     "web": "sage_robot.web.node:WebNode",
+    "brain": "sage_robot.brain.node:BrainNode",
 }
 
 # Which extra provides a node's module, for the message when its import fails.

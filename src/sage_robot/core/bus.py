@@ -165,6 +165,7 @@ class Bus:
         self.transport.attach(self._deliver_local)
         self._topics: dict[str, TopicInfo] = {}
         self._services: dict[str, ServiceInfo] = {}
+        self._taps: list[Callable[[str, Any], None]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
         from sage_robot.core.actions import ActionRegistry  # the module builds on this one
@@ -210,6 +211,14 @@ class Bus:
             info.last = msg
         for sub in list(info.subscribers):
             sub._push(msg)
+        for tap in self._taps:
+            tap(name, msg)
+
+    def add_tap(self, tap: Callable[[str, Any], None]) -> Callable[[], None]:
+        """See every publication on every topic (recorders, live views). Returns a remover.
+        A tap runs inside ``publish``: it must be quick and must not raise."""
+        self._taps.append(tap)
+        return lambda: self._taps.remove(tap) if tap in self._taps else None
 
     def subscribe(
         self,

@@ -21,6 +21,7 @@ from sage_robot.core.config.areas import (
 )
 from sage_robot.core.config.base import Section
 from sage_robot.core.config.devices import CameraSettings, LidarSettings
+from sage_robot.core.config.ops import OpsSettings
 from sage_robot.core.config.robot import BatterySettings, McuSettings, RobotSettings
 from sage_robot.core.errors import ConfigError
 
@@ -33,6 +34,7 @@ class Settings(Section):
     battery: BatterySettings = Field(default_factory=BatterySettings)
     lidar: LidarSettings = Field(default_factory=LidarSettings)
     camera: CameraSettings = Field(default_factory=CameraSettings)
+    ops: OpsSettings = Field(default_factory=OpsSettings)
     sim: SimSettings = Field(default_factory=SimSettings)
     nav: NavSettings = Field(default_factory=NavSettings)
     voice: VoiceSettings = Field(default_factory=VoiceSettings)

@@ -1,0 +1,137 @@
+"""Nodes: ``recorder`` (bus → MCAP), ``replay`` (MCAP → bus) and ``foxglove`` (live view)."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any
+
+from sage_robot.app.recording import ros2
+from sage_robot.app.recording.mcap_io import McapRecorder, _ros_name, read_mcap
+from sage_robot.core.msgs import OccupancyGrid
+from sage_robot.core.node import Node
+
+RECORD_PATH = "record_path"  # ctx.resources key: where the recorder writes
+RECORD_TOPICS = "record_topics"  # ctx.resources key: topics to record (default: the profile's)
+REPLAY_PATH = "replay_path"  # ctx.resources key: what the replay node plays
+REPLAY_SPEED = "replay_speed"
+
+
+class RecorderNode(Node):
+    name = "recorder"
+
+    async def setup(self) -> None:
+        path = self.ctx.resources.get(RECORD_PATH)
+        if not path:
+            raise ValueError("recorder: no output file (ctx.resources['record_path'])")
+        self.topics = set(self.ctx.resources.get(RECORD_TOPICS) or self.settings.ops.record_topics)
+        self.recorder = McapRecorder(path)
+        self.errors = 0
+        self._remove_tap = self.bus.add_tap(self._tap)
+        self.log.info("recording", path=str(path), topics=len(self.topics))
+
+    def _tap(self, topic: str, msg: Any) -> None:
+        if topic not in self.topics:
+            return
+        try:
+            self.recorder.write(topic, msg, self.clock.now())
+        except Exception as exc:  # a tap must never break publishing
+            self.errors += 1
+            if self.errors == 1:
+                self.log.error("cannot record a message", topic=topic, error=str(exc))
+
+    async def teardown(self) -> None:
+        self._remove_tap()
+        self.recorder.close()
+        self.log.info(
+            "recording closed", path=str(self.recorder.path), messages=sum(self.recorder.counts.values())
+        )
+
+    def stats(self) -> dict[str, Any]:
+        return {"messages": dict(self.recorder.counts), "errors": self.errors}
+
+
+class ReplayNode(Node):
+    """Publish a recording on the bus with its original timing (scaled by the speed)."""
+
+    name = "replay"
+
+    async def setup(self) -> None:
+        self.path = Path(self.ctx.resources[REPLAY_PATH])
+        self.speed = float(self.ctx.resources.get(REPLAY_SPEED, 1.0))
+        self.published = 0
+        self.messages = await asyncio.to_thread(lambda: list(read_mcap(self.path)))
+        for topic, _, msg in self.messages:
+            if isinstance(msg, OccupancyGrid):
+                self.bus.declare(topic, OccupancyGrid, latched=True)
+
+    async def run(self) -> None:
+        if not self.messages:
+            return
+        t0, start = self.messages[0][1], self.clock.now()
+        for topic, t, msg in self.messages:
+            await self.clock.sleep_until(start + (t - t0) / self.speed)
+            self.bus.publish(topic, msg)
+            self.published += 1
+        self.log.info("replay finished", messages=self.published)
+
+    def stats(self) -> dict[str, Any]:
+        return {"published": self.published, "total": len(getattr(self, "messages", []))}
+
+
+class FoxgloveNode(Node):
+    """A Foxglove WebSocket server publishing every topic live, as ROS 2 CDR messages."""
+
+    name = "foxglove"
+
+    async def setup(self) -> None:
+        import foxglove
+
+        self._fg = foxglove
+        ops = self.settings.ops
+        self.server = foxglove.start_server(name="SAGE", host=ops.foxglove_host, port=ops.foxglove_port)
+        self.port = self.server.port
+        self.ctx.resources["foxglove_port"] = self.port
+        self._channels: dict[str, tuple[Any, Any]] = {}
+        self._last_map = -1e9
+        self.sent = 0
+        self.errors = 0
+        self._remove_tap = self.bus.add_tap(self._tap)
+        self.log.info("Foxglove live view", url=f"ws://{ops.foxglove_host}:{self.port}")
+
+    def _channel(self, topic: str, ros_type: str) -> tuple[Any, Any]:
+        found = self._channels.get(topic)
+        if found is None:
+            from mcap_ros2._dynamic import serialize_dynamic
+
+            name, text = _ros_name(ros_type), ros2.msgdef(ros_type)
+            encode = serialize_dynamic(name, text)[name]
+            schema = self._fg.Schema(name=name, encoding="ros2msg", data=text.encode())
+            found = self._channels[topic] = (
+                self._fg.Channel(topic, schema=schema, message_encoding="cdr"),
+                encode,
+            )
+        return found
+
+    def _tap(self, topic: str, msg: Any) -> None:
+        now = self.clock.now()
+        if isinstance(msg, OccupancyGrid):
+            if now - self._last_map < self.settings.ops.foxglove_map_period_s:
+                return
+            self._last_map = now
+        try:
+            ros_type, data = ros2.convert(msg)
+            channel, encode = self._channel(topic, ros_type)
+            channel.log(encode(data))
+            self.sent += 1
+        except Exception as exc:  # a tap must never break publishing
+            self.errors += 1
+            if self.errors == 1:
+                self.log.error("cannot send to Foxglove", topic=topic, error=str(exc))
+
+    async def teardown(self) -> None:
+        self._remove_tap()
+        self.server.stop()
+
+    def stats(self) -> dict[str, Any]:
+        return {"port": self.port, "channels": len(self._channels), "sent": self.sent, "errors": self.errors}

@@ -1,0 +1,134 @@
+"""`sage record`, `sage replay`, `sage status`, `sage install-service`."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import shutil
+import sys
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+from sage_robot.core.errors import SageError
+
+SERVICE_TEMPLATE = """[Unit]
+Description=SAGE tour robot ({mode})
+After=network-online.target
+Wants=network-online.target
+
+[Service]
+Type=simple
+User={user}
+WorkingDirectory={workdir}
+Environment=PYTHONUNBUFFERED=1
+ExecStart={sage} {profile_arg}up --mode {mode}
+Restart=on-failure
+RestartSec=5
+KillSignal=SIGINT
+TimeoutStopSec=15
+
+[Install]
+WantedBy=multi-user.target
+"""
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser("record", help="run the robot (simulated by default) and record topics to MCAP")
+    p.add_argument("out", help="output .mcap file")
+    p.add_argument("--topics", nargs="+", help="topics to record (default: the profile's ops.record_topics)")
+    p.add_argument("--mode", default="sim", help="profile to run while recording (sim, tour, slam)")
+    p.add_argument("--duration", type=float, help="stop after this many seconds (of the run's clock)")
+    p.add_argument("--fast", action="store_true", help="simulation as fast as possible")
+    p.set_defaults(func=run_record)
+
+    p = sub.add_parser("replay", help="feed an MCAP recording back onto the bus (with web and Foxglove)")
+    p.add_argument("file", help=".mcap file made by `sage record`")
+    p.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
+    p.add_argument("--nodes", nargs="*", default=["foxglove"], help="nodes to run beside the replay")
+    p.set_defaults(func=run_replay)
+
+    p = sub.add_parser("status", help="health of every node of a running robot (from its web server)")
+    p.add_argument("--url", help="robot web address (default http://127.0.0.1:<web.port>)")
+    p.add_argument("--json", action="store_true", help="print the raw JSON")
+    p.set_defaults(func=run_status)
+
+    p = sub.add_parser("install-service", help="write a systemd unit so the robot starts at boot")
+    p.add_argument("--mode", default="tour", choices=["tour", "slam"])
+    p.add_argument("--out", default="/etc/systemd/system/sage.service", help="where to write the unit")
+    p.add_argument("--user", default=os.environ.get("SUDO_USER") or os.environ.get("USER") or "root")
+    p.set_defaults(func=run_install_service)
+
+
+def run_record(args: argparse.Namespace) -> int:
+    from sage_robot.app.recording.nodes import RECORD_PATH, RECORD_TOPICS
+    from sage_robot.app.runtime import make_context, run_launcher, specs_for
+    from sage_robot.core.config import load_profile
+
+    over = {"sim": {"speed": None}} if args.fast else None
+    settings = load_profile(args.profile, over)
+    ctx = make_context(settings, simulated=args.mode.startswith("sim"))
+    ctx.resources[RECORD_PATH] = Path(args.out)
+    if args.topics:
+        ctx.resources[RECORD_TOPICS] = args.topics
+    launcher = asyncio.run(run_launcher(ctx, specs_for(args.mode, ["recorder"]), until=args.duration))
+    counts = launcher.health_report().get("recorder", {}).get("stats", {})
+    print(f"wrote {args.out}: {json.dumps(counts)}")
+    return 0
+
+
+def run_replay(args: argparse.Namespace) -> int:
+    from sage_robot.app.launcher import NodeSpec
+    from sage_robot.app.recording.nodes import REPLAY_PATH, REPLAY_SPEED
+    from sage_robot.app.registry import node_class
+    from sage_robot.app.runtime import make_context, run_launcher
+    from sage_robot.core.config import load_profile
+
+    if not Path(args.file).exists():
+        raise SageError(f"{args.file}: recording not found")
+    ctx = make_context(load_profile(args.profile), simulated=False)
+    ctx.resources[REPLAY_PATH] = args.file
+    ctx.resources[REPLAY_SPEED] = args.speed
+    specs = [NodeSpec("replay", node_class("replay"), restart=False)]
+    specs += [NodeSpec(n, node_class(n)) for n in args.nodes]
+    asyncio.run(run_launcher(ctx, specs))
+    return 0
+
+
+def run_status(args: argparse.Namespace) -> int:
+    from sage_robot.core.config import load_profile
+
+    url = (args.url or f"http://127.0.0.1:{load_profile(args.profile).web.port}").rstrip("/") + "/api/health"
+    try:
+        with urllib.request.urlopen(url, timeout=5) as resp:
+            report = json.load(resp)
+    except (urllib.error.URLError, OSError) as exc:
+        raise SageError(f"no robot answers at {url} ({exc}); is `sage sim` or `sage up` running?") from None
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return 0
+    nodes = report.get("nodes", report)
+    print(f"{'node':<18} {'state':<9} {'restarts':>8}  last error")
+    for name, h in nodes.items():
+        print(f"{name:<18} {h.get('state', '?'):<9} {h.get('restarts', 0):>8}  {h.get('last_error', '')}")
+    bad = [n for n, h in nodes.items() if h.get("state") != "running"]
+    return 1 if bad else 0
+
+
+def run_install_service(args: argparse.Namespace) -> int:
+    sage = shutil.which("sage") or str(Path(sys.executable).with_name("sage"))
+    profile_arg = f"--profile {Path(args.profile).resolve()} " if args.profile else ""
+    unit = SERVICE_TEMPLATE.format(
+        mode=args.mode, user=args.user, workdir=Path.cwd(), sage=sage, profile_arg=profile_arg
+    )
+    out = Path(args.out)
+    try:
+        out.write_text(unit)
+    except PermissionError:
+        raise SageError(f"cannot write {out}: run with sudo, or choose --out") from None
+    print(f"wrote {out}")
+    print("enable it with: sudo systemctl daemon-reload && sudo systemctl enable --now sage")
+    print("the robot starts at boot from its dock, where its initial pose is (nav.initial_place)")
+    return 0
