@@ -62,8 +62,8 @@ class FirmwareModel:
         self._targets = (0.0, 0.0)  # wheel speed targets after the watchdog ramp (m/s)
         self._pwm = (PWM_STOP_US, PWM_STOP_US)
         self._duty = (0.0, 0.0)
-        self._next_odom = 0.0
-        self._next_imu = 0.0
+        self._next_odom = ODOM_PERIOD_S  # first frames one period after power-up
+        self._next_imu = IMU_PERIOD_S
         self.watchdog_trips = 0
         self._tripped = False
         self.frames_sent: Counter[str] = Counter()
@@ -95,6 +95,11 @@ class FirmwareModel:
     @property
     def watchdog_tripped(self) -> bool:
         return self._tripped
+
+    @property
+    def last_command_t(self) -> float | None:
+        """When the last command was received (s of the model's time), None before any."""
+        return self._last_cmd_t
 
     @property
     def last_command(self) -> tuple[float, float]:
