@@ -1,0 +1,268 @@
+"""The offline brain's intent classifier: deterministic rules over cleaned words.
+
+``classify(text, places)`` returns an :class:`Intent` (a name and, for navigation and
+place questions, the place). Rules are tried in a fixed order (a table, not a chain of
+ifs); the first that fires wins. Wake words and greetings at the start are stripped so
+"hey jarvis, take me to the café" is a navigation request.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from sage_robot.brain.matching import PlaceMatch, exact_match, fuzzy_match, match_place
+from sage_robot.core.places import Place, Places
+
+INTENTS = (
+    "greeting",
+    "goodbye",
+    "small_talk",
+    "capabilities",
+    "navigate",
+    "where_is",
+    "cancel",
+    "where_am_i",
+    "battery",
+    "ip_address",
+    "tour",
+    "list_places",
+    "describe_place",
+    "question",
+    "unknown",
+)
+
+_CONTRACTIONS = {
+    "what's": "what is",
+    "where's": "where is",
+    "how's": "how is",
+    "who's": "who is",
+    "that's": "that is",
+    "it's": "it is",
+    "let's": "let us",
+    "i'm": "i am",
+    "i'd": "i would",
+    "i'll": "i will",
+    "don't": "do not",
+    "can't": "can not",
+    "you're": "you are",
+    "we're": "we are",
+}
+WAKE_WORDS = ("hey jarvis", "jarvis", "hey sage", "sage", "robot", "okay", "ok", "um", "uh", "so", "well")
+GREETING = re.compile(
+    r"^(hi|hello|hey|hiya|howdy|greetings|yo|good (morning|afternoon|evening|day))( there)?\b"
+)
+
+
+def prepare(text: str) -> str:
+    """Lower case, contractions expanded, punctuation gone, 'i p' → 'ip'."""
+    t = text.lower().replace("’", "'").replace("é", "e")
+    for short, long in _CONTRACTIONS.items():
+        t = re.sub(rf"\b{re.escape(short)}\b", long, t)
+    t = re.sub(r"[^a-z0-9' ]+", " ", t).replace("'", "")
+    t = re.sub(r"\bi p\b", "ip", t)
+    t = re.sub(r"\be c e\b", "ece", t)
+    return " ".join(t.split())
+
+
+def strip_wake(t: str) -> str:
+    changed = True
+    while changed:
+        changed = False
+        for w in WAKE_WORDS:
+            if t.startswith(w + " "):
+                t, changed = t[len(w) + 1 :], True
+    return t
+
+
+@dataclass(frozen=True)
+class Intent:
+    name: str
+    place: Place | None = None
+    slot: str = ""  # the words that named the place (or the tour theme, the question)
+    how: str = ""  # how the place was matched
+
+    @property
+    def place_name(self) -> str:
+        return self.place.name if self.place else ""
+
+
+def _any(*patterns: str) -> re.Pattern[str]:
+    return re.compile("|".join(f"(?:{p})" for p in patterns))
+
+
+CANCEL = _any(
+    r"^(stop|cancel|halt|abort|never ?mind|forget it|wait|hold on|freeze)\b",
+    r"\b(cancel|abort)\b",
+    r"\bstop (moving|navigating|driving|going|the (tour|robot))\b",
+    r"\bdo not go\b",
+)
+IP = _any(r"\bip\b", r"\bnetwork address\b", r"\bon the network\b", r"\bip address", r"\bhost ?name\b")
+BATTERY = _any(
+    r"\bbattery\b",
+    r"\bcharge level\b",
+    r"\bpower level\b",
+    r"\bare you charged\b",
+    r"\bneed to (charge|recharge)\b",
+    r"\b(how much|what is your) (charge|power)\b",
+)
+WHERE_AM_I = _any(
+    r"\bwhere (am i|are we|are you)\b",
+    r"^(what|which) (room|place|area|floor|part of the building|lab)( is this| are we in| am i in)",
+    r"^what is this (place|room|lab)\b",
+    r"\bwhat part of the building\b",
+)
+TOUR = _any(
+    r"\btour\b", r"\bshow (me|us) around\b", r"\bwalk (me|us) around\b", r"\bshow (me|us) everything\b"
+)
+LIST_PLACES = _any(
+    r"\bwhat (places|rooms|labs|locations)\b",
+    r"\bwhich (places|rooms|labs|locations)\b",
+    r"\bwhere (else )?can (you|we) (go|take)\b",
+    r"\bwhat is there to (see|visit)\b",
+    r"\blist (the |all |your )?(places|rooms|locations|destinations)\b",
+    r"\bwhat can (i|we) (see|visit)\b",
+    r"\bplaces (can|do) you\b",
+)
+WHERE_IS = re.compile(
+    r"^(where is|where are|where can i find|where do i find|how do i get to|how do i find|"
+    r"how can i get to|which way is|which way to|where would i find|do you know where)\b( the)?"
+)
+DESCRIBE = re.compile(
+    r"^(tell me about|tell me more about|what is|what are|describe|what happens (in|at)|"
+    r"what do (they|you|people) do (in|at)|what goes on (in|at)|what is in|what can i do (in|at))\b"
+)
+CAPABILITIES = _any(
+    r"^help\b",
+    r"\bwhat can you do\b",
+    r"\bwhat do you do\b",
+    r"\bwhat are you able to\b",
+    r"\byour (features|abilities|skills)\b",
+    r"\bwhat can i ask\b",
+    r"\bhow can you help\b",
+    r"\bwhat kind of things\b",
+    r"\bwhat are you (good|for)\b",
+)
+NAVIGATE = _any(
+    r"\b(take|bring|lead|walk|guide|escort|drive) (me|us)\b",
+    r"\b(lead|show) the way\b",
+    r"^(go|head|drive|navigate|move|return|come)\b",
+    r"\b(let us|lets|can we|could we|shall we) (go|head|visit|see)\b",
+    r"\bi (want|would like|wanna|need|would love) to (go|see|visit|get|check out|use)\b",
+    r"\bi need (the|a)\b",
+    r"\bshow (me|us) (the|where)\b",
+    r"\b(i am|we are) (hungry|thirsty)\b",
+    r"\bnavigate\b",
+)
+GOODBYE = _any(
+    r"\bthank",
+    r"\bbye\b",
+    r"\bgoodbye\b",
+    r"\bsee you\b",
+    r"\bhave a (nice|good|great)\b",
+    r"\bthat is all\b",
+    r"\bthats all\b",
+    r"\bgood night\b",
+    r"\bcheers\b",
+)
+SMALL_TALK = _any(
+    r"\bhow are you\b",
+    r"\bhow is it going\b",
+    r"\byour name\b",
+    r"\bwho are you\b",
+    r"\bjoke\b",
+    r"\bfunny\b",
+    r"\bare you (alive|real|a robot|human|happy|smart|a person)\b",
+    r"\bdo you like\b",
+    r"\bhow old\b",
+    r"\bwho (made|built|created|programmed) you\b",
+    r"\bfavou?rite\b",
+    r"\bwhat are you\b",
+    r"\bdo you (have|get) (feelings|tired)\b",
+)
+QUESTION = re.compile(
+    r"^(what|when|where|who|whom|whose|why|which|how|is|are|was|were|do|does|did|can|could|"
+    r"will|would|should|tell me|explain|i wonder)\b"
+)
+# Filler that may follow a greeting without making it anything else.
+_GREETING_TAIL = re.compile(r"^(there|everyone|friend|buddy|how are you|how is it going)?\s*$")
+
+
+def _slot_after(pattern: re.Pattern[str], t: str) -> str:
+    m = pattern.search(t)
+    return t[m.end() :].strip() if m else t
+
+
+def _place(slot: str, whole: str, places: Places, strict: bool = False) -> PlaceMatch | None:
+    """The place in the slot, else anywhere in the sentence; ``strict``: names only."""
+    if strict:
+        return exact_match(slot, places) or fuzzy_match(slot, places)
+    return match_place(slot, places) or (exact_match(whole, places) if whole != slot else None)
+
+
+def classify(text: str, places: Places) -> Intent:
+    """The intent of one visitor utterance."""
+    t = strip_wake(prepare(text))
+    if not t:
+        return Intent("unknown")
+    m = GREETING.match(t)
+    if m:
+        rest = strip_wake(t[m.end() :].strip())
+        if _GREETING_TAIL.match(rest) or rest in WAKE_WORDS:
+            return Intent("greeting")
+        t = rest
+    return _classify(t, places)
+
+
+def _classify(t: str, places: Places) -> Intent:
+    if CANCEL.search(t):
+        return Intent("cancel")
+    if IP.search(t):
+        return Intent("ip_address")
+    if WHERE_AM_I.search(t):
+        return Intent("where_am_i")
+    if LIST_PLACES.search(t):
+        return Intent("list_places")
+    if TOUR.search(t):
+        return Intent("tour", slot=_tour_theme(t))
+    if WHERE_IS.search(t):
+        slot = _slot_after(WHERE_IS, t)
+        hit = _place(re.sub(r"\b(located|at|from here)$", "", slot).strip(), t, places)
+        if hit:
+            return Intent("where_is", hit.place, slot, hit.how)
+        return Intent("question", slot=t)
+    if NAVIGATE.search(t):
+        slot = _slot_after(NAVIGATE, t)
+        hit = _place(slot, t, places)
+        return Intent("navigate", hit.place if hit else None, slot, hit.how if hit else "")
+    if BATTERY.search(t):
+        return Intent("battery")
+    if DESCRIBE.search(t):
+        slot = _slot_after(DESCRIBE, t)
+        hit = _place(re.sub(r"\b(about|for|used for)$", "", slot).strip(), t, places, strict=True)
+        if hit:
+            return Intent("describe_place", hit.place, slot, hit.how)
+    if CAPABILITIES.search(t):
+        return Intent("capabilities")
+    if SMALL_TALK.search(t):
+        return Intent("small_talk")
+    if GOODBYE.search(t):
+        return Intent("goodbye")
+    if QUESTION.search(t) and len(t.split()) >= 2:
+        return Intent("question", slot=t)
+    return Intent("unknown")
+
+
+def _tour_theme(t: str) -> str:
+    m = re.search(r"\btour (of|through|around) (the )?(.+)$", t)
+    if not m:
+        return ""
+    theme = m.group(3).strip()
+    return "" if theme in ("building", "place", "college", "campus", "everything") else theme
+
+
+CONFIRM = re.compile(
+    r"^(yes|yeah|yep|sure|ok|okay|please|please do|lets go|let us go|go ahead|take me there|"
+    r"sounds good|absolutely|of course|why not)\b"
+)
+DECLINE = re.compile(r"^(no|nope|not now|no thanks|maybe later|nah)\b")

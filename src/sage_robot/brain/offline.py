@@ -1,0 +1,266 @@
+"""The offline brain: deterministic answers with no language model.
+
+Each intent (:mod:`sage_robot.brain.intents`) has a handler; handlers act through the
+same tools the model uses (so `sage ask --json` shows the same tool calls) and answer in
+fixed, speakable lines. Knowledge questions are answered from the knowledge base: the
+passage that shares the most words with the question, trimmed to two or three
+sentences around the best one; when nothing shares enough, an honest "I don't know".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+from sage_robot.brain.base import Brain, Say, Speaker, TurnResult
+from sage_robot.brain.intents import CONFIRM, DECLINE, Intent, classify, prepare
+from sage_robot.brain.matching import content_words
+from sage_robot.brain.phrases import (
+    CAPABILITIES,
+    DONT_KNOW,
+    GOODBYES,
+    GREETINGS,
+    UNKNOWN,
+    lower_first,
+    pick,
+    place_phrase,
+    small_talk_line,
+    spoken_ip,
+    upper_first,
+)
+from sage_robot.brain.speech import split_sentences
+from sage_robot.brain.tools import ToolCall, ToolRegistry
+from sage_robot.core.places import Place
+
+KB_TOP_K = 3
+KB_MIN_OVERLAP = 0.5  # share of the question's content words a passage must contain
+ANSWER_SENTENCES = 3
+ANSWER_MAX_CHARS = 360
+NEAR_M = 3.0  # closer than this to a place is "at" it
+PLACES_SPOKEN = 6  # places named in a list before "and more"
+GENERIC_WORDS = frozenset({"valpo", "valparaiso", "university", "college", "engin", "tell", "know"})
+
+
+def kb_answer(question: str, passages: list[str]) -> str | None:
+    """Two or three speakable sentences from the passage that best covers the question."""
+    wanted = set(content_words(question)) - GENERIC_WORDS
+    if not wanted:
+        return None
+    best: tuple[float, list[str], int] | None = None
+    for text in passages:
+        sentences = split_sentences(text)
+        if not sentences:
+            continue
+        found = set(content_words(text)) & wanted
+        if len(found) / len(wanted) < KB_MIN_OVERLAP:
+            continue
+        scores = [len(set(content_words(s)) & wanted) for s in sentences]
+        start = max(range(len(sentences)), key=lambda i: scores[i])
+        cover = len(found) / len(wanted)
+        if best is None or cover > best[0]:
+            best = (cover, sentences, start)
+    if best is None:
+        return None
+    _, sentences, start = best
+    out: list[str] = []
+    for s in sentences[start : start + ANSWER_SENTENCES]:
+        if out and sum(len(x) + 1 for x in out) + len(s) > ANSWER_MAX_CHARS:
+            break
+        out.append(s)
+    return " ".join(out)
+
+
+def join_names(names: list[str]) -> str:
+    if len(names) <= 1:
+        return "".join(names)
+    return ", ".join(names[:-1]) + " and " + names[-1]
+
+
+Handler = Callable[[Intent, str], Awaitable[str]]
+
+
+class OfflineBrain(Brain):
+    """Rules, tools and the knowledge base; no model, no network."""
+
+    kind = "offline"
+
+    def __init__(self, tools: ToolRegistry, robot_name: str = "SAGE Jarvis") -> None:
+        self.tools = tools
+        self.robot = tools.ctx.robot
+        self.name = robot_name
+        self._offer: Place | None = None  # a place offered after "where is ..."
+        self._calls: list[ToolCall] = []
+        self._handlers: dict[str, Handler] = {
+            "greeting": self._greeting,
+            "goodbye": self._goodbye,
+            "small_talk": self._small_talk,
+            "capabilities": self._capabilities,
+            "navigate": self._navigate,
+            "where_is": self._where_is,
+            "cancel": self._cancel,
+            "where_am_i": self._where_am_i,
+            "battery": self._battery,
+            "ip_address": self._ip,
+            "tour": self._tour,
+            "list_places": self._list_places,
+            "describe_place": self._describe,
+            "question": self._question,
+            "unknown": self._unknown,
+        }
+
+    def reset(self) -> None:
+        self._offer = None
+
+    async def classify(self, text: str) -> Intent:
+        return classify(text, await self.robot.places())
+
+    async def respond(self, text: str, say: Say | None = None) -> TurnResult:
+        result = TurnResult(brain=self.kind)
+        speaker = Speaker(say, result)
+        self._calls = result.tool_calls
+        intent = await self._follow_up(text) or await self.classify(text)
+        result.intent = intent.name
+        if intent.name != "where_is":
+            self._offer = None
+        reply = await self._handlers[intent.name](intent, text)
+        for sentence in split_sentences(reply):
+            speaker(sentence)
+        return speaker.finish()
+
+    async def react(self, prompt: str, fallback: str, say: Say | None = None) -> TurnResult:
+        result = TurnResult(brain=self.kind, intent="event")
+        speaker = Speaker(say, result)
+        for sentence in split_sentences(fallback):
+            speaker(sentence)
+        return speaker.finish()
+
+    async def _follow_up(self, text: str) -> Intent | None:
+        """'Yes' after 'shall I take you there?' goes there; 'no' drops the offer."""
+        if self._offer is None:
+            return None
+        t = prepare(text)
+        if CONFIRM.match(t) and len(t.split()) <= 4:
+            return Intent("navigate", self._offer, t, "offer")
+        if DECLINE.match(t):
+            self._offer = None
+            return Intent("goodbye", slot="no")
+        return None
+
+    async def _tool(self, name: str, args: dict[str, Any] | None = None) -> ToolCall:
+        call = await self.tools.call(name, args or {})
+        self._calls.append(call)
+        return call
+
+    # ------------------------------------------------------------ handlers
+    async def _greeting(self, intent: Intent, text: str) -> str:
+        return pick(GREETINGS, text).format(name=self.name)
+
+    async def _goodbye(self, intent: Intent, text: str) -> str:
+        if intent.slot == "no":
+            return "No problem. Let me know if you would like to go anywhere."
+        return pick(GOODBYES, text)
+
+    async def _small_talk(self, intent: Intent, text: str) -> str:
+        return small_talk_line(text, self.name)
+
+    async def _capabilities(self, intent: Intent, text: str) -> str:
+        return CAPABILITIES
+
+    async def _navigate(self, intent: Intent, text: str) -> str:
+        if intent.place is None:
+            return await self._unknown_place(intent.slot)
+        call = await self._tool("set_goal", {"location": intent.place.name})
+        if not call.result.ok:
+            return f"Sorry, I can not go to {place_phrase(intent.place)} right now: {call.result.error}."
+        return f"Sure, follow me to {place_phrase(intent.place)}!"
+
+    async def _unknown_place(self, slot: str) -> str:
+        places = await self.robot.places()
+        names = [place_phrase(p) for p in places][:PLACES_SPOKEN]
+        what = f" called {slot}" if slot and len(slot) < 40 else " by that name"
+        if not names:
+            return f"I do not know a place{what}, and I have no map of places loaded right now."
+        more = " and more" if len(places) > PLACES_SPOKEN else ""
+        return f"I do not know a place{what}. I can take you to {join_names(names)}{more}."
+
+    async def _where_is(self, intent: Intent, text: str) -> str:
+        assert intent.place is not None
+        self._offer = intent.place
+        what = f": {lower_first(intent.place.description.rstrip('.'))}" if intent.place.description else ""
+        return f"{upper_first(place_phrase(intent.place))} is on my map{what}. Shall I take you there?"
+
+    async def _cancel(self, intent: Intent, text: str) -> str:
+        call = await self._tool("cancel_goal")
+        if not call.result.ok:
+            return f"I could not stop: {call.result.error}."
+        if call.result.data.get("stopped"):
+            return "Okay, I have stopped."
+        return "Okay. I was not going anywhere anyway."
+
+    async def _where_am_i(self, intent: Intent, text: str) -> str:
+        call = await self._tool("where_am_i")
+        if not call.result.ok:
+            return f"I am not sure where we are: {call.result.error}."
+        d = call.result.data
+        place = place_phrase(d["nearest_place"])
+        if not d.get("localized", True):
+            return f"I am not completely sure, but I think we are near {place}."
+        if d["distance_m"] <= NEAR_M:
+            return f"We are at {place}."
+        return f"We are about {round(d['distance_m'])} meters from {place}."
+
+    async def _battery(self, intent: Intent, text: str) -> str:
+        call = await self._tool("battery_status")
+        if not call.result.ok:
+            return "I can not read my battery right now."
+        d = call.result.data
+        charging = " and charging" if d["status"] in ("charging", "full") else ""
+        if d["percent"] is None:
+            return f"My battery reads {d['voltage']} volts{charging}."
+        return f"My battery is at {d['percent']} percent{charging}."
+
+    async def _ip(self, intent: Intent, text: str) -> str:
+        call = await self._tool("get_ip_address")
+        if not call.result.ok:
+            return "I do not have a network address right now."
+        parts = [f"{spoken_ip(a[0])} on {name}" for name, a in call.result.data["interfaces"].items()]
+        return f"My address is {join_names(parts[:3])}."
+
+    async def _tour(self, intent: Intent, text: str) -> str:
+        args = {"theme": intent.slot} if intent.slot else {}
+        call = await self._tool("start_tour", args)
+        if not call.result.ok:
+            return f"Sorry, I can not start a tour right now: {call.result.error}."
+        stops = call.result.data["stops"]
+        return (
+            f"Wonderful, let us go! The tour has {len(stops)} stops, "
+            f"starting with {place_phrase(stops[0])}. Follow me!"
+        )
+
+    async def _list_places(self, intent: Intent, text: str) -> str:
+        places = await self.robot.places()
+        if not len(places):
+            return "I have no places loaded right now."
+        names = [place_phrase(p) for p in places if p.name != "DOCKING_STATION"]
+        return f"I can take you to {join_names(names)}. Where would you like to go?"
+
+    async def _describe(self, intent: Intent, text: str) -> str:
+        assert intent.place is not None
+        call = await self._tool("describe_place", {"name": intent.place.name})
+        d = call.result.data
+        desc = d.get("description") or "one of the places on my tour"
+        line = f"Here is what I know about {place_phrase(intent.place)}: {lower_first(desc.rstrip('.'))}."
+        if d.get("talking_points"):
+            line += " " + " ".join(split_sentences(d["talking_points"])[:2])
+        self._offer = intent.place
+        return line + " Would you like to go there?"
+
+    async def _question(self, intent: Intent, text: str) -> str:
+        call = await self._tool("kb_search", {"query": text, "top_k": KB_TOP_K})
+        if not call.result.ok:
+            return f"I can not look that up right now, because {lower_first(call.result.error)}."
+        passages = [str(p["text"]) for p in call.result.data["passages"]]
+        return kb_answer(text, passages) or DONT_KNOW
+
+    async def _unknown(self, intent: Intent, text: str) -> str:
+        return UNKNOWN

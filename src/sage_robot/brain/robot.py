@@ -1,0 +1,219 @@
+"""The brain's view of the robot: navigation, places, battery and the knowledge base,
+reached only through the bus (actions and services other nodes serve).
+
+Every method returns a value: when a service or action is not there (its node is not
+running yet) the answer says so in words a person (or a model) can use; nothing raises
+for an expected failure. Services that take no arguments are called with ``Text("")``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sage_robot.core import topics
+from sage_robot.core.actions import GoalHandle, GoalStatus
+from sage_robot.core.bus import Bus
+from sage_robot.core.errors import ConfigError, ServiceError
+from sage_robot.core.msgs import BatteryState, Event, Text
+from sage_robot.core.msgs.kb import Passage, SearchRequest, SearchResponse
+from sage_robot.core.msgs.nav import (
+    NavigateFeedback,
+    NavigateGoal,
+    PlaceList,
+    TourGoal,
+    WhereAmI,
+)
+from sage_robot.core.places import Place, Places, load_places
+
+PLACES_TTL_S = 30.0  # how long a fetched place list is trusted before asking again
+SERVICE_TIMEOUT_S = 3.0  # nav and kb service calls from a conversation turn
+KB_TIMEOUT_S = 8.0  # a knowledge-base search may embed the query first
+
+_log = logging.getLogger("sage.brain")
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """An expected result: ``ok`` with data, or not ok with a reason for a person."""
+
+    ok: bool
+    reason: str = ""
+    data: Any = None
+
+
+@dataclass
+class NavStatus:
+    """What the robot is doing, for the system prompt and the tools."""
+
+    navigating: bool = False
+    target: str = ""
+    state: str = "idle"
+    distance_remaining_m: float = 0.0
+    touring: bool = False
+
+    def describe(self) -> str:
+        if not self.navigating:
+            return "idle, standing still"
+        what = "on a tour, heading" if self.touring else "navigating"
+        dist = f", {self.distance_remaining_m:.0f} meters to go" if self.distance_remaining_m else ""
+        return f"{what} to {self.target} ({self.state}{dist})"
+
+
+class RobotLink:
+    """Bus-facing helper shared by the tools, the prompt and the offline brain."""
+
+    def __init__(self, bus: Bus, fallback_places: Path | None = None) -> None:
+        self.bus = bus
+        self.fallback_places = fallback_places
+        self.battery: BatteryState | None = None
+        self.nav = NavStatus()
+        self._places: Places | None = None
+        self._places_at = -1e18
+        self._goal: GoalHandle | None = None
+        self._watch: asyncio.Task[None] | None = None
+        # Called with (place, reason) when a goal this link started fails.
+        self.on_failure: Callable[[str, str], None] | None = None
+
+    # ------------------------------------------------------------ bus inputs
+    def on_battery(self, msg: BatteryState) -> None:
+        self.battery = msg
+
+    def on_event(self, event: Event) -> None:
+        if event.kind == "arrived" and not self.nav.touring:
+            self.nav = NavStatus()
+
+    # ------------------------------------------------------------ places
+    async def places(self) -> Places:
+        """The building's places: from the navigator's service, else the waypoints file."""
+        now = self.bus.clock.now()
+        if self._places is not None and now - self._places_at < PLACES_TTL_S:
+            return self._places
+        fetched = await self._fetch_places()
+        if fetched is not None:
+            self._places, self._places_at = fetched, now
+        elif self._places is None:
+            self._places = self._load_fallback()
+        return self._places
+
+    async def _fetch_places(self) -> Places | None:
+        if not self.bus.has_service(topics.PLACES):
+            return None
+        try:
+            reply = await self.bus.call(topics.PLACES, Text(""), timeout=SERVICE_TIMEOUT_S)
+        except ServiceError as exc:
+            _log.warning("place list unavailable: %s", exc)
+            return None
+        if not isinstance(reply, PlaceList):
+            return None
+        return Places(
+            [Place(p.name, p.pose, p.description, tuple(p.aliases)) for p in reply.places],
+            topics.PLACES,
+        )
+
+    def _load_fallback(self) -> Places:
+        if self.fallback_places is None:
+            return Places([])
+        try:
+            return load_places(self.fallback_places)
+        except ConfigError as exc:
+            _log.warning("no places: %s", exc)
+            return Places([])
+
+    # ------------------------------------------------------------ navigation
+    async def navigate(self, place: Place) -> Outcome:
+        """Start driving to ``place`` and return at once (the arrival comes as an event)."""
+        if not self.bus.actions.has(topics.NAVIGATE_TO):
+            return Outcome(False, "navigation is not running right now")
+        handle = await self.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=place.name))
+        self._track(handle, place.name, touring=False)
+        return Outcome(True, data={"place": place.name, "status": "navigating"})
+
+    async def tour(self, names: list[str]) -> Outcome:
+        if not self.bus.actions.has(topics.TOUR):
+            return Outcome(False, "the tour guide part of navigation is not running right now")
+        handle = await self.bus.actions.send_goal(topics.TOUR, TourGoal(places=tuple(names)))
+        self._track(handle, names[0], touring=True)
+        return Outcome(True, data={"places": names, "status": "touring"})
+
+    async def cancel(self) -> Outcome:
+        stopped = False
+        if self.bus.has_service(topics.CANCEL_NAV):
+            try:
+                await self.bus.call(topics.CANCEL_NAV, Text(""), timeout=SERVICE_TIMEOUT_S)
+                stopped = True
+            except ServiceError as exc:
+                _log.warning("cancel service failed: %s", exc)
+        if self._goal is not None and not self._goal.done:
+            await self._goal.cancel()
+            stopped = True
+        was = self.nav.target
+        self.nav = NavStatus()
+        if not stopped:
+            if self.bus.actions.has(topics.NAVIGATE_TO):
+                return Outcome(True, data={"stopped": False, "note": "I was not going anywhere"})
+            return Outcome(False, "navigation is not running right now")
+        return Outcome(True, data={"stopped": True, "was_going_to": was})
+
+    def _track(self, handle: GoalHandle, target: str, touring: bool) -> None:
+        self._goal = handle
+        self.nav = NavStatus(True, target, "planning", 0.0, touring)
+        if self._watch is not None:
+            self._watch.cancel()
+        self._watch = asyncio.get_running_loop().create_task(self._follow(handle, target))
+
+    async def _follow(self, handle: GoalHandle, target: str) -> None:
+        async for fb in handle.feedback():
+            if self._goal is not handle:
+                return
+            if isinstance(fb, NavigateFeedback):
+                self.nav.state = fb.state.value
+                self.nav.distance_remaining_m = fb.distance_remaining_m
+                self.nav.target = fb.place or self.nav.target
+            elif hasattr(fb, "place") and hasattr(fb, "state"):  # TourFeedback
+                self.nav.target = str(fb.place)
+                self.nav.state = str(getattr(fb.state, "value", fb.state))
+        result = await handle.result()
+        if self._goal is not handle:
+            return
+        self.nav = NavStatus()
+        value = result.value
+        failed = result.status is GoalStatus.ABORTED or (result.ok and not getattr(value, "succeeded", True))
+        if failed and self.on_failure is not None:
+            reason = getattr(value, "reason", "") or result.message or "navigation failed"
+            self.on_failure(target, reason)
+
+    async def close(self) -> None:
+        if self._watch is not None:
+            self._watch.cancel()
+            await asyncio.gather(self._watch, return_exceptions=True)
+
+    # ------------------------------------------------------------ where, kb
+    async def where_am_i(self) -> Outcome:
+        if not self.bus.has_service(topics.WHERE_AM_I):
+            return Outcome(False, "localization is not running right now")
+        try:
+            reply = await self.bus.call(topics.WHERE_AM_I, Text(""), timeout=SERVICE_TIMEOUT_S)
+        except ServiceError as exc:
+            return Outcome(False, f"I could not ask localization: {exc}")
+        if not isinstance(reply, WhereAmI):
+            return Outcome(False, "localization gave an answer I do not understand")
+        return Outcome(True, data=reply)
+
+    async def kb_search(self, query: str, top_k: int) -> Outcome:
+        if not self.bus.has_service(topics.KB_SEARCH):
+            return Outcome(False, "the knowledge base is not running right now")
+        try:
+            reply = await self.bus.call(
+                topics.KB_SEARCH, SearchRequest(query=query, top_k=top_k), timeout=KB_TIMEOUT_S
+            )
+        except ServiceError as exc:
+            return Outcome(False, f"the knowledge base search failed: {exc}")
+        if not isinstance(reply, SearchResponse):
+            return Outcome(False, "the knowledge base gave an answer I do not understand")
+        passages: tuple[Passage, ...] = reply.passages
+        return Outcome(True, data=passages)

@@ -1,0 +1,267 @@
+"""The robot's tools (registered in :data:`sage_robot.brain.tools.TOOLS`).
+
+Navigation and the knowledge base are reached through :class:`RobotLink` (the bus);
+web search through Tavily's HTTP API when a key is set. Every failure a visitor can
+cause, or a missing service, is a :class:`ToolResult` error, never an exception.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+from typing import Any
+
+from sage_robot.brain.matching import match_place, places_with_theme
+from sage_robot.brain.tools import ToolContext, ToolResult, no_args, tool
+from sage_robot.core.config import read_secret
+from sage_robot.core.places import Place, Places
+
+KB_PASSAGE_CHARS = 700  # passage text handed to the model per hit
+WEB_TIMEOUT_S = 10.0
+WEB_CONTENT_CHARS = 500  # per web result
+MAX_TOUR_STOPS = 8
+DOCK = "DOCKING_STATION"
+
+
+def _place_list(places: Places) -> list[dict[str, str]]:
+    return [{"name": p.name, "description": p.description} for p in places]
+
+
+async def _resolve(ctx: ToolContext, text: str) -> tuple[Place | None, Places]:
+    places = await ctx.robot.places()
+    if text in places:
+        return places.get(text), places
+    found = match_place(text, places)
+    return (found.place if found else None), places
+
+
+def _unknown_place(text: str, places: Places) -> ToolResult:
+    if not len(places):
+        return ToolResult.fail(f"I know of no place called {text!r}: no places are loaded")
+    return ToolResult.fail(
+        f"there is no place matching {text!r}; known places: {', '.join(places.names())}",
+        places=_place_list(places),
+    )
+
+
+@tool(
+    "set_goal",
+    "Start driving to a named place (non-blocking: returns at once; an arrival event follows). "
+    "One goal at a time. Accepts a place name, an alias or a description.",
+    {
+        "type": "object",
+        "properties": {"location": {"type": "string", "minLength": 1, "description": "Place name"}},
+        "required": ["location"],
+        "additionalProperties": False,
+    },
+)
+async def set_goal(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    place, places = await _resolve(ctx, args["location"])
+    if place is None:
+        return _unknown_place(args["location"], places)
+    out = await ctx.robot.navigate(place)
+    if not out.ok:
+        return ToolResult.fail(out.reason)
+    return ToolResult(True, {"status": "navigating", "place": place.name, "description": place.description})
+
+
+@tool("cancel_goal", "Stop the current navigation goal or tour.", no_args())
+async def cancel_goal(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    out = await ctx.robot.cancel()
+    return ToolResult(True, dict(out.data)) if out.ok else ToolResult.fail(out.reason)
+
+
+@tool(
+    "kb_search",
+    "Search the university's local knowledge base. Use it first for questions about the "
+    "university, the college of engineering, its programs, people and buildings.",
+    {
+        "type": "object",
+        "properties": {
+            "query": {"type": "string", "minLength": 1},
+            "top_k": {"type": "integer", "minimum": 1, "maximum": 10, "default": 3},
+        },
+        "required": ["query"],
+        "additionalProperties": False,
+    },
+)
+async def kb_search(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    out = await ctx.robot.kb_search(args["query"], int(args.get("top_k", 3)))
+    if not out.ok:
+        return ToolResult.fail(out.reason)
+    hits = [
+        {"text": p.text[:KB_PASSAGE_CHARS], "title": p.title, "source": p.source, "score": round(p.score, 3)}
+        for p in out.data
+    ]
+    return ToolResult(True, {"passages": hits, "count": len(hits)})
+
+
+@tool(
+    "web_search",
+    "Search the internet (general knowledge, current events). Only when the knowledge base has no answer.",
+    {
+        "type": "object",
+        "properties": {
+            "query": {"type": "string", "minLength": 1},
+            "max_results": {"type": "integer", "minimum": 1, "maximum": 8, "default": 3},
+        },
+        "required": ["query"],
+        "additionalProperties": False,
+    },
+)
+async def web_search(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    import httpx
+
+    llm = ctx.settings.llm
+    key = read_secret(llm.web_search_key_env, ctx.settings.secrets_file or None)
+    if key is None:
+        return ToolResult.fail(f"web search is not available: no {llm.web_search_key_env} is set")
+    body = {"query": args["query"], "max_results": int(args.get("max_results", 3))}
+    headers = {"Authorization": f"Bearer {key.get_secret_value()}"}
+    try:
+        async with httpx.AsyncClient(timeout=WEB_TIMEOUT_S) as client:
+            reply = await client.post(llm.web_search_url, json=body, headers=headers)
+    except httpx.HTTPError as exc:
+        return ToolResult.fail(f"web search could not be reached: {type(exc).__name__}")
+    if reply.status_code != 200:
+        return ToolResult.fail(f"web search answered HTTP {reply.status_code}")
+    try:
+        data = reply.json()
+        results = [
+            {"title": r.get("title", ""), "content": str(r.get("content", ""))[:WEB_CONTENT_CHARS]}
+            for r in data.get("results", [])
+        ]
+    except (ValueError, AttributeError, TypeError):
+        return ToolResult.fail("web search gave an answer I could not read")
+    out: dict[str, Any] = {"results": results}
+    if data.get("answer"):
+        out["answer"] = data["answer"]
+    return ToolResult(True, out)
+
+
+def ip_addresses() -> dict[str, list[str]]:
+    """IPv4 addresses of the machine's interfaces, loopback left out."""
+    try:
+        import psutil
+    except ImportError:
+        psutil = None
+    found: dict[str, list[str]] = {}
+    if psutil is not None:
+        for name, addrs in psutil.net_if_addrs().items():
+            v4 = [a.address for a in addrs if a.family == socket.AF_INET and not a.address.startswith("127.")]
+            if v4:
+                found[name] = v4
+        return found
+    try:  # no psutil: the address the default route would use (no packet is sent)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.connect(("192.0.2.1", 9))
+            found["default"] = [s.getsockname()[0]]
+    except OSError:
+        pass
+    return found
+
+
+@tool("get_ip_address", "The robot's network addresses, to find it on the network.", no_args())
+async def get_ip_address(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    found = ip_addresses()
+    if not found:
+        return ToolResult.fail("the robot has no network address right now")
+    return ToolResult(True, {"interfaces": found})
+
+
+@tool("where_am_i", "Where the robot is now: the nearest named place and how far from it.", no_args())
+async def where_am_i(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    out = await ctx.robot.where_am_i()
+    if not out.ok:
+        return ToolResult.fail(out.reason)
+    w = out.data
+    return ToolResult(
+        True,
+        {
+            "nearest_place": w.nearest_place,
+            "distance_m": round(w.distance_m, 1),
+            "localized": w.localized,
+            "navigation": ctx.robot.nav.describe(),
+        },
+    )
+
+
+@tool("battery_status", "The robot's battery: charge in percent, voltage and whether charging.", no_args())
+async def battery_status(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    b = ctx.robot.battery
+    if b is None:
+        return ToolResult.fail("no battery reading has arrived yet")
+    pct = None if math.isnan(b.percentage) else round(100 * b.percentage)
+    return ToolResult(True, {"percent": pct, "voltage": round(b.voltage, 2), "status": b.status.value})
+
+
+@tool("list_places", "Every place the robot can go, with a description.", no_args())
+async def list_places(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    places = await ctx.robot.places()
+    return ToolResult(True, {"places": _place_list(places)})
+
+
+@tool(
+    "describe_place",
+    "What a place is: its description and other names.",
+    {
+        "type": "object",
+        "properties": {"name": {"type": "string", "minLength": 1}},
+        "required": ["name"],
+        "additionalProperties": False,
+    },
+)
+async def describe_place(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    place, places = await _resolve(ctx, args["name"])
+    if place is None:
+        return _unknown_place(args["name"], places)
+    data = {"name": place.name, "description": place.description, "aliases": list(place.aliases)}
+    if place.dwell_text:
+        data["talking_points"] = place.dwell_text
+    return ToolResult(True, data)
+
+
+def tour_stops(places: Places, names: list[str] | None, theme: str | None) -> tuple[list[Place], list[str]]:
+    """The tour's places (and the names that matched nothing) from a list or a theme."""
+    unknown: list[str] = []
+    if names:
+        stops = []
+        for n in names:
+            found = places.get(n) if n in places else None
+            m = found or (hit.place if (hit := match_place(n, places)) else None)
+            if m is None:
+                unknown.append(n)
+            elif m not in stops:
+                stops.append(m)
+    elif theme:
+        stops = places_with_theme(theme, places)
+    else:
+        stops = list(places)
+    stops = [p for p in stops if p.name != DOCK and p.name != "BATHROOMS"] or stops
+    return stops[:MAX_TOUR_STOPS], unknown
+
+
+@tool(
+    "start_tour",
+    "Start a guided tour through several places (non-blocking). Give the places in order, or a "
+    "theme such as 'labs' or 'robotics', or neither for the standard tour.",
+    {
+        "type": "object",
+        "properties": {
+            "places": {"type": "array", "items": {"type": "string", "minLength": 1}, "maxItems": 12},
+            "theme": {"type": "string"},
+        },
+        "additionalProperties": False,
+    },
+)
+async def start_tour(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+    places = await ctx.robot.places()
+    stops, unknown = tour_stops(places, args.get("places"), args.get("theme"))
+    if unknown:
+        return _unknown_place(", ".join(unknown), places)
+    if not stops:
+        return ToolResult.fail(f"no place fits the theme {args.get('theme')!r}", places=_place_list(places))
+    out = await ctx.robot.tour([p.name for p in stops])
+    if not out.ok:
+        return ToolResult.fail(out.reason)
+    return ToolResult(True, {"status": "touring", "stops": [p.name for p in stops]})
