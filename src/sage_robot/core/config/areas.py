@@ -68,9 +68,11 @@ class KbSettings(Section):
 
 class WebSettings(Section):
     host: str = Field("0.0.0.0", description="Address the web server listens on.")
-    port: int = Field(8000, gt=0, lt=65536, description="Port of every page and socket.")
+    port: int = Field(8000, ge=0, lt=65536, description="Port of every page and socket; 0 = any free.")
     deadman_s: float = Field(0.5, gt=0, description="Teleop stops after this silence (s).")
     allowed_origins: tuple[str, ...] = Field((), description="Extra WebSocket origins.")
+    camera_fps: float = Field(15.0, gt=0, le=60, description="Camera frames/s sent to a page, at most.")
+    talk_per_min: float = Field(20.0, gt=0, description="Visitor questions per minute per address.")
 
 
 class EmailSettings(Section):

@@ -1,0 +1,131 @@
+"""Admin endpoints (operator login): places (list, add), recent logs, and the knowledge base.
+
+Adding a place writes the waypoints file the profile names (``nav.waypoints``, else the
+one beside ``nav.map``). The file shipped inside the package is never rewritten: the
+admin is told to point ``nav.waypoints`` at a copy.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+from typing import Any
+
+from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request
+
+from sage_robot.core.errors import ConfigError
+from sage_robot.core.log import RECENT, get_logger
+from sage_robot.core.msgs import Pose2D
+from sage_robot.core.paths import package_data, waypoints_yaml
+from sage_robot.core.places import Place, Places, load_places, validate_places, write_places
+from sage_robot.web.api import _pose, list_places
+from sage_robot.web.common import WebState, json_body, require_operator, state_of
+
+router = APIRouter(dependencies=[Depends(require_operator)])
+PLACE_NAME = re.compile(r"^[A-Z][A-Z0-9_]{0,47}$")  # the seed's waypoint names: CLEAN_ROOM
+MAX_TEXT = 500  # characters of a description
+MAX_ALIASES = 10
+LOG_LIMIT_MAX = 500
+
+_log = get_logger("web")
+_places_lock = asyncio.Lock()
+
+
+@router.get("/api/admin/logs")
+async def logs(limit: int = 200, level: str = "") -> dict[str, Any]:
+    if not 1 <= limit <= LOG_LIMIT_MAX:
+        raise HTTPException(status_code=422, detail=f"limit: expected 1..{LOG_LIMIT_MAX}")
+    records = list(RECENT.records)
+    if level:
+        records = [r for r in records if r["level"] == level.lower()]
+    return {"records": records[-limit:]}
+
+
+def _text(body: dict[str, Any], key: str) -> str:
+    value = body.get(key, "")
+    if not isinstance(value, str) or len(value) > MAX_TEXT:
+        raise HTTPException(status_code=422, detail=f"{key}: expected text up to {MAX_TEXT} characters")
+    return value.strip()
+
+
+def _aliases(body: dict[str, Any]) -> tuple[str, ...]:
+    value = body.get("aliases", [])
+    if isinstance(value, str):
+        value = [a for a in (s.strip() for s in value.split(",")) if a]
+    if (
+        not isinstance(value, list)
+        or len(value) > MAX_ALIASES
+        or not all(isinstance(a, str) and 0 < len(a) <= 80 for a in value)
+    ):
+        raise HTTPException(status_code=422, detail=f"aliases: expected up to {MAX_ALIASES} short names")
+    return tuple(a.strip() for a in value)
+
+
+@router.post("/api/admin/places")
+async def add_place(request: Request) -> dict[str, Any]:
+    """Add a place: ``{"name", "description", "aliases", "at_robot": true}`` or with ``x, y, theta``."""
+    st = state_of(request)
+    body = await json_body(request)
+    name = body.get("name")
+    if not isinstance(name, str) or not PLACE_NAME.match(name.strip()):
+        raise HTTPException(
+            status_code=422, detail="name: use capitals, digits and _ (like CLEAN_ROOM), up to 48"
+        )
+    pose = _robot_pose(st) if body.get("at_robot") is True else _pose(body)
+    place = Place(name.strip(), pose, _text(body, "description"), _aliases(body))
+    path = waypoints_yaml(st.node.settings)
+    if path.resolve().is_relative_to(package_data().resolve()):
+        raise HTTPException(
+            status_code=409,
+            detail=f"{path} ships with SAGE and is not rewritten; copy it and set nav.waypoints "
+            "in your profile to the copy",
+        )
+    async with _places_lock:
+        try:
+            current = await asyncio.to_thread(load_places, path) if path.exists() else Places([], str(path))
+            if place.name in current:
+                raise HTTPException(status_code=409, detail=f"a place named {place.name} exists already")
+            updated = Places([*current, place], str(path))
+            if st.hub.map_grid is not None:
+                validate_places(Places([place], str(path)), st.hub.map_grid)
+            await asyncio.to_thread(write_places, updated, path)
+        except ConfigError as exc:
+            raise HTTPException(status_code=422, detail=str(exc)) from None
+    _log.info("place added", place=place.name, x=round(pose.x, 2), y=round(pose.y, 2), file=str(path))
+    return {"ok": True, "file": str(path), "places": await list_places(request)}
+
+
+def _robot_pose(st: WebState) -> Pose2D:
+    pose = st.hub.robot_pose
+    if pose is None:
+        raise HTTPException(status_code=409, detail="the robot's pose is not known yet")
+    return Pose2D(*pose)
+
+
+def mount_kb(app: FastAPI, st: WebState) -> None:
+    """Include the knowledge base's router when the KB is installed; the admin page says so otherwise."""
+    try:
+        from sage_robot.kb.api import make_router  # type: ignore[import-not-found,unused-ignore]
+    except ImportError as exc:
+        st.extras["kb"] = f"the knowledge base is not installed ({exc.name or exc})"
+        return
+    service = st.node.ctx.resources.get("kb_service")
+    if service is None:
+        try:
+            from sage_robot.kb.service import KbService
+
+            service = KbService(st.node.settings.kb)  # type: ignore[call-arg,unused-ignore]
+        except Exception as exc:
+            st.extras["kb"] = f"the knowledge base could not start: {exc}"
+            return
+    app.include_router(make_router(service, require_operator))
+    st.extras["kb"] = ""
+
+
+@router.get("/api/admin/info")
+async def info(request: Request) -> dict[str, Any]:
+    st = state_of(request)
+    return {
+        "kb": st.extras.get("kb", ""),
+        "waypoints": str(waypoints_yaml(st.node.settings)),
+    }

@@ -1,0 +1,176 @@
+"""REST endpoints of the operator pages: health, map image, places, goals, initial pose.
+
+Navigation is reached through the bus (``navigate_to`` action, ``/nav/cancel``,
+``/initialpose``), never by import.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from typing import Any
+
+from fastapi import APIRouter, Depends, HTTPException, Request
+from fastapi.responses import Response
+
+from sage_robot.core import topics
+from sage_robot.core.errors import ConfigError, SageError
+from sage_robot.core.log import get_logger
+from sage_robot.core.msgs import Pose2D, PoseStamped, PoseWithCovariance, to_dict
+from sage_robot.core.msgs.nav import NavigateGoal, PlaceList
+from sage_robot.web.common import is_operator, json_body, require_operator, state_of
+
+router = APIRouter()
+INITIAL_POSE_COV = (0.25, 0.0, 0.0, 0.0, 0.25, 0.0, 0.0, 0.0, 0.07)  # x,y m², theta rad² (RViz's)
+PLACES_TIMEOUT_S = 2.0
+MAX_COORD_M = 10_000.0  # a pose farther than this from the origin is a typo
+
+_log = get_logger("web")
+
+
+def _number(body: dict[str, Any], key: str, default: float | None = None) -> float:
+    value = body.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise HTTPException(status_code=422, detail=f"{key}: expected a finite number, got {value!r}")
+    if abs(value) > MAX_COORD_M:
+        raise HTTPException(status_code=422, detail=f"{key}: {value} is out of range")
+    return float(value)
+
+
+def _pose(body: dict[str, Any]) -> Pose2D:
+    return Pose2D(_number(body, "x"), _number(body, "y"), _number(body, "theta", 0.0))
+
+
+@router.get("/api/health")
+async def health(request: Request) -> dict[str, Any]:
+    """Nodes and their state (errors only for the operator)."""
+    st = state_of(request)
+    launcher = st.node.ctx.resources.get("launcher")
+    nodes = launcher.health_report() if launcher is not None else {}
+    if not is_operator(request):
+        nodes = {n: {k: v for k, v in h.items() if k != "last_error"} for n, h in nodes.items()}
+    return {
+        "nodes": nodes,
+        "simulated": st.node.clock.is_simulated,
+        "time": st.node.clock.now(),
+        "robot": st.node.settings.robot.name,
+    }
+
+
+@router.get("/api/map.png", dependencies=[Depends(require_operator)])
+async def map_png(request: Request) -> Response:
+    found = await state_of(request).hub.map_png()
+    if found is None:
+        raise HTTPException(status_code=404, detail="no map yet (is map_server or SLAM running?)")
+    return Response(found[1], media_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
+async def list_places(request: Request) -> list[dict[str, Any]]:
+    """Places from navigation's service, else from the waypoints file."""
+    st = state_of(request)
+    bus = st.node.bus
+    if bus.has_service(topics.PLACES):
+        with contextlib.suppress(SageError):
+            reply = await bus.call(topics.PLACES, None, timeout=PLACES_TIMEOUT_S)
+            if isinstance(reply, PlaceList):
+                return [_place_dict(p.name, p.pose, p.description, p.aliases) for p in reply.places]
+    from sage_robot.core.paths import waypoints_yaml
+    from sage_robot.core.places import load_places
+
+    try:
+        places = await asyncio.to_thread(load_places, waypoints_yaml(st.node.settings))
+    except ConfigError as exc:
+        _log.warning("no places", error=str(exc))
+        return []
+    return [_place_dict(p.name, p.pose, p.description, p.aliases) for p in places]
+
+
+def _place_dict(name: str, pose: Pose2D, description: str, aliases: tuple[str, ...]) -> dict[str, Any]:
+    return {
+        "name": name,
+        "x": round(pose.x, 3),
+        "y": round(pose.y, 3),
+        "theta": round(pose.theta, 4),
+        "description": description,
+        "aliases": list(aliases),
+    }
+
+
+@router.get("/api/places", dependencies=[Depends(require_operator)])
+async def places(request: Request) -> dict[str, Any]:
+    return {"places": await list_places(request)}
+
+
+@router.post("/api/goal", dependencies=[Depends(require_operator)])
+async def goal(request: Request) -> dict[str, Any]:
+    """Start navigation: ``{"place": name}`` or ``{"x", "y", "theta"}`` in the map frame."""
+    st = state_of(request)
+    body = await json_body(request)
+    place = body.get("place")
+    if place is not None:
+        if not isinstance(place, str) or not place.strip():
+            raise HTTPException(status_code=422, detail="place: expected a place name")
+        nav_goal = NavigateGoal(place=place.strip())
+    else:
+        nav_goal = NavigateGoal(pose=_pose(body))
+    if st.hub.estop:
+        raise HTTPException(status_code=409, detail="e-stop is engaged: release it first")
+    bus = st.node.bus
+    if not bus.actions.has(topics.NAVIGATE_TO):
+        raise HTTPException(status_code=503, detail="navigation is not running")
+    if nav_goal.pose is not None:
+        bus.publish(topics.GOAL_POSE, PoseStamped(st.node.clock.now(), "map", nav_goal.pose))
+    handle = await bus.actions.send_goal(topics.NAVIGATE_TO, nav_goal)
+    st.node.spawn(_watch_goal(st, handle, nav_goal), "web.goal")
+    _log.info("navigation goal from the operator", goal=to_dict(nav_goal))
+    return {"ok": True, "goal_id": handle.goal_id}
+
+
+async def _watch_goal(st: Any, handle: Any, nav_goal: NavigateGoal) -> None:
+    """Feed the navigation state to the pages until the goal ends."""
+    label = nav_goal.place or "clicked point"
+    st.hub.set("nav", {"type": "nav", "state": "sent", "place": label, "done": False})
+    async for fb in handle.feedback():
+        data = to_dict(fb)
+        st.hub.set(
+            "nav",
+            {
+                "type": "nav",
+                "state": data.get("state", ""),
+                "place": data.get("place") or label,
+                "distance_remaining_m": data.get("distance_remaining_m"),
+                "done": False,
+            },
+        )
+    result = await handle.result()
+    value = to_dict(result.value) if result.value is not None else {}
+    st.hub.set(
+        "nav",
+        {
+            "type": "nav",
+            "state": result.status.value,
+            "place": value.get("place") or label,
+            "reason": value.get("reason") or result.message,
+            "done": True,
+        },
+    )
+
+
+@router.post("/api/cancel", dependencies=[Depends(require_operator)])
+async def cancel(request: Request) -> dict[str, Any]:
+    await state_of(request).teleop.cancel_navigation()
+    return {"ok": True}
+
+
+@router.post("/api/initial_pose", dependencies=[Depends(require_operator)])
+async def initial_pose(request: Request) -> dict[str, Any]:
+    """Set the localization's pose: ``{"x", "y", "theta"}`` in the map frame."""
+    st = state_of(request)
+    pose = _pose(await json_body(request))
+    st.node.bus.publish(
+        topics.INITIAL_POSE,
+        PoseWithCovariance(st.node.clock.now(), "map", pose, INITIAL_POSE_COV),
+    )
+    _log.info("initial pose from the operator", x=pose.x, y=pose.y, theta=pose.theta)
+    return {"ok": True}

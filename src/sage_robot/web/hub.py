@@ -1,0 +1,247 @@
+"""The web server's view of the bus: latest value per channel, fanned out to WebSocket clients.
+
+Each channel (``battery``, ``ui_state``, ``pose``, ``scan``, ...) keeps only its latest
+JSON message. A client is a :class:`Listener` that is told which channels changed and
+sends the latest of each, no more often than the channel's minimum interval. A slow
+phone therefore skips intermediate values instead of queueing them, and one slow
+client never holds up another. Camera frames work the same way (latest frame only).
+Events (arrivals, safety stops) are the exception: each is kept, in a short ring.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections import deque
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+from sage_robot.core import topics
+from sage_robot.core.msgs import (
+    REGISTRY,
+    BatteryState,
+    CompressedImage,
+    Event,
+    LaserScan,
+    OccupancyGrid,
+    Odometry,
+    Path,
+    PoseStamped,
+    PoseWithCovariance,
+)
+from sage_robot.core.msgs.nav import LocalizationHealth
+from sage_robot.core.msgs.voice import Doa, UiState
+from sage_robot.core.node import Node
+from sage_robot.web import views
+
+# Minimum seconds between two sends of a channel to one client (phones on Wi-Fi).
+MIN_INTERVAL_S: dict[str, float] = {
+    "battery": 0.5,
+    "ui_state": 0.04,  # the mouth follows tts_viseme at up to 25 Hz
+    "doa": 0.08,  # the seed's DOA server broadcast every 80 ms
+    "pose": 0.1,
+    "scan": 0.2,
+    "plan": 0.5,
+    "goal": 0.2,
+    "people": 0.2,
+    "loc": 0.5,
+    "map": 1.0,  # SLAM grows the map; re-send at most once a second
+    "estop": 0.0,
+    "teleop": 0.0,
+    "nav": 0.2,
+    "camera": 1.0 / 15.0,  # frames/s cap per client
+}
+EVENTS_KEPT = 50  # recent events shown on a newly opened page
+AMCL_FRESH_S = 2.0  # prefer the AMCL pose over odometry while it is this recent (clock s)
+
+
+@dataclass
+class Listener:
+    """One WebSocket client's interest: changed channels and queued events."""
+
+    channels: frozenset[str]
+    dirty: set[str] = field(default_factory=set)
+    events: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
+    wake: asyncio.Event = field(default_factory=asyncio.Event)
+    last_sent: dict[str, float] = field(default_factory=dict)
+
+    def mark(self, channel: str) -> None:
+        if channel in self.channels:
+            self.dirty.add(channel)
+            self.wake.set()
+
+
+class Hub:
+    """Subscribes to the bus for the web node and keeps the latest of everything."""
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self.bus, self.clock, self.settings = node.bus, node.clock, node.settings
+        self.latest: dict[str, dict[str, Any]] = {}
+        self.events: deque[dict[str, Any]] = deque(maxlen=EVENTS_KEPT)
+        self.listeners: set[Listener] = set()
+        self.frame: bytes = b""
+        self.frame_seq = 0
+        self.map_version = 0
+        self.map_grid: OccupancyGrid | None = None
+        self._map_png: tuple[int, bytes] | None = None
+        self._amcl_t: float | None = None
+        self.robot_pose: tuple[float, float, float] | None = None
+        self.robot_frame = ""
+        mount = self.settings.robot.lidar
+        self.lidar_mount = (mount.x_m, mount.y_m, mount.yaw_rad)
+        self.estop = False
+        self.counts = {"frames_in": 0, "events_in": 0}
+
+    def start(self) -> None:
+        sub = self.node.subscribe
+        sub(topics.BATTERY, BatteryState, self._on_battery)
+        sub(topics.UI_STATE, UiState, self._on_ui_state, maxsize=50)
+        sub(topics.DOA, Doa, self._on_doa)
+        sub(topics.ODOM, Odometry, self._on_odom)
+        sub(topics.AMCL_POSE, PoseWithCovariance, self._on_amcl)
+        sub(topics.SCAN, LaserScan, self._on_scan, maxsize=2)
+        sub(topics.PLAN, Path, self._on_plan)
+        sub(topics.GOAL_POSE, PoseStamped, self._on_goal)
+        sub(topics.MAP, OccupancyGrid, self._on_map, maxsize=2)
+        sub(topics.CAMERA, CompressedImage, self._on_camera, maxsize=2)
+        sub(topics.EVENTS, Event, self._on_event, maxsize=50)
+        sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
+        people = REGISTRY.get("People")  # the simulator's people, when the simulator is installed
+        if people is not None:
+            sub(topics.SIM_PEOPLE, people, self._on_people)
+        self.set("estop", {"type": "estop", "engaged": False})
+
+    # ------------------------------------------------------------ fan-out
+    def set(self, channel: str, message: dict[str, Any]) -> None:
+        self.latest[channel] = message
+        for listener in self.listeners:
+            listener.mark(channel)
+
+    def listen(self, channels: Iterable[str]) -> Listener:
+        listener = Listener(frozenset(channels))
+        for ch in listener.channels:
+            if ch in self.latest or (ch == "camera" and self.frame):
+                listener.dirty.add(ch)
+        if "events" in listener.channels:
+            listener.events.extend(self.events)
+        listener.wake.set()
+        self.listeners.add(listener)
+        return listener
+
+    def unlisten(self, listener: Listener) -> None:
+        self.listeners.discard(listener)
+
+    async def next_batch(self, listener: Listener) -> tuple[list[dict[str, Any]], bool]:
+        """Wait for something to send: (JSON messages, whether a new camera frame is due)."""
+        while True:
+            await listener.wake.wait()
+            listener.wake.clear()
+            now = time.monotonic()
+            out: list[dict[str, Any]] = []
+            camera = False
+            wait_s: float | None = None
+            for ch in sorted(listener.dirty):
+                due = listener.last_sent.get(ch, 0.0) + MIN_INTERVAL_S.get(ch, 0.0)
+                if due > now:
+                    wait_s = min(wait_s or 1e9, due - now)
+                    continue
+                listener.dirty.discard(ch)
+                listener.last_sent[ch] = now
+                if ch == "camera":
+                    camera = True
+                elif ch in self.latest:
+                    out.append(self.latest[ch])
+            while listener.events:
+                out.append(listener.events.popleft())
+            if wait_s is not None:
+                asyncio.get_running_loop().call_later(wait_s, listener.wake.set)
+            if out or camera:
+                return out, camera
+
+    # ------------------------------------------------------------ bus callbacks
+    def _on_battery(self, msg: BatteryState) -> None:
+        self.set("battery", views.battery_json(msg))
+
+    def _on_ui_state(self, msg: UiState) -> None:
+        self.set("ui_state", views.ui_state_json(msg))
+
+    def _on_doa(self, msg: Doa) -> None:
+        self.set("doa", {"type": "doa", "angle": round(msg.angle_deg, 1), "source": msg.source})
+
+    def _on_odom(self, msg: Odometry) -> None:
+        self.set("odom", {"type": "odom", "x": msg.pose.x, "y": msg.pose.y, "v": msg.twist.linear_x})
+        fresh_amcl = self._amcl_t is not None and self.clock.now() - self._amcl_t < AMCL_FRESH_S
+        if not fresh_amcl:
+            self._set_pose(msg.pose.as_tuple(), msg.frame_id)
+
+    def _on_amcl(self, msg: PoseWithCovariance) -> None:
+        self._amcl_t = self.clock.now()
+        self._set_pose(msg.pose.as_tuple(), msg.frame_id or "map")
+
+    def _set_pose(self, pose: tuple[float, float, float], frame: str) -> None:
+        self.robot_pose, self.robot_frame = pose, frame
+        from sage_robot.core.msgs import Pose2D
+
+        self.set("pose", views.pose_json(Pose2D(*pose), frame))
+
+    def _on_scan(self, msg: LaserScan) -> None:
+        if self.robot_pose is None:
+            return
+        pts = views.scan_points(msg, self.robot_pose, self.lidar_mount)
+        self.set("scan", views.scan_json(pts))
+
+    def _on_plan(self, msg: Path) -> None:
+        self.set("plan", views.path_json(msg))
+
+    def _on_goal(self, msg: PoseStamped) -> None:
+        p = msg.pose
+        self.set("goal", {"type": "goal", "x": p.x, "y": p.y, "theta": p.theta, "place": ""})
+
+    def _on_people(self, msg: Any) -> None:
+        self.set("people", {"type": "people", "points": views.people_points(msg)})
+
+    def _on_loc(self, msg: LocalizationHealth) -> None:
+        self.set(
+            "loc",
+            {"type": "loc", "score": round(msg.score, 3), "lost": msg.lost, "particles": msg.particles},
+        )
+
+    def _on_map(self, msg: OccupancyGrid) -> None:
+        self.map_grid = msg
+        self.map_version += 1
+        self.set("map", views.map_meta_json(msg, self.map_version))
+
+    def _on_camera(self, msg: CompressedImage) -> None:
+        self.frame = msg.data
+        self.frame_seq += 1
+        self.counts["frames_in"] += 1
+        for listener in self.listeners:
+            listener.mark("camera")
+
+    def _on_event(self, msg: Event) -> None:
+        self.counts["events_in"] += 1
+        item = {
+            "type": "event",
+            "t": msg.stamp,
+            "source": msg.source,
+            "kind": msg.kind,
+            "message": msg.message,
+        }
+        self.events.append(item)
+        for listener in self.listeners:
+            if "events" in listener.channels:
+                listener.events.append(item)
+                listener.wake.set()
+
+    # ------------------------------------------------------------ map image
+    async def map_png(self) -> tuple[int, bytes] | None:
+        """The current map as PNG (rendered off the event loop, cached per version)."""
+        grid, version = self.map_grid, self.map_version
+        if grid is None:
+            return None
+        if self._map_png is None or self._map_png[0] != version:
+            png = await asyncio.to_thread(views.map_png, grid)
+            self._map_png = (version, png)
+        return self._map_png

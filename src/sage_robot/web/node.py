@@ -1,0 +1,120 @@
+"""WebNode: the one web server (pages, REST, WebSockets), on the bus's asyncio loop.
+
+uvicorn's ``Server.serve()`` runs as a task of the node, so handlers publish on the bus
+directly with no thread hop. The listening socket is bound in ``setup`` (a busy port
+fails the start with a message that names it); ``web.port`` 0 picks a free port, which
+is then in :attr:`WebNode.port` and ``ctx.resources["web_url"]``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import logging
+import socket
+from collections.abc import Iterator
+from typing import Any
+
+import uvicorn
+
+from sage_robot.core.errors import ConfigError
+from sage_robot.core.log import RECENT
+from sage_robot.core.node import Node
+
+WS_MAX_MESSAGE_BYTES = 64 * 1024  # larger WebSocket messages close the socket (1009)
+SHUTDOWN_GRACE_S = 1  # open connections get this long to finish on stop (s)
+WEB_URL = "web_url"  # ctx.resources key: the server's base URL
+
+
+class WebNode(Node):
+    name = "web"
+
+    async def setup(self) -> None:
+        from sage_robot.web.app import create_app
+        from sage_robot.web.auth import Sessions, operator_password
+        from sage_robot.web.common import WebState
+        from sage_robot.web.hub import Hub
+        from sage_robot.web.teleop import Teleop
+
+        _keep_recent_logs()
+        web = self.settings.web
+        self.hub = Hub(self)
+        self.hub.start()
+        self.teleop = Teleop(self, self.hub)
+        self.teleop.start()
+        self.sessions = Sessions(operator_password(self.settings))
+        self.state = WebState(self, self.hub, self.teleop, self.sessions)
+        self.app = create_app(self.state)
+        self.sock = _bind(web.host, web.port)
+        self.port = int(self.sock.getsockname()[1])
+        shown = "127.0.0.1" if web.host in ("0.0.0.0", "::") else web.host
+        self.url = f"http://{shown}:{self.port}"
+        self.ctx.resources[WEB_URL] = self.url
+        config = uvicorn.Config(
+            self.app,
+            log_level="warning",
+            access_log=False,
+            lifespan="off",
+            ws_max_size=WS_MAX_MESSAGE_BYTES,
+            timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+        )
+        self.server = _QuietServer(config)
+        self.spawn(self.server.serve(sockets=[self.sock]), "web.server")
+        self.log.info("web server listening", url=self.url)
+
+    async def teardown(self) -> None:
+        server = getattr(self, "server", None)
+        if server is not None:
+            server.should_exit = True
+        teleop = getattr(self, "teleop", None)
+        if teleop is not None and teleop.command != (0.0, 0.0):
+            teleop._publish(0.0, 0.0)
+        sock = getattr(self, "sock", None)
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.close()
+
+    def stats(self) -> dict[str, Any]:
+        hub, teleop = getattr(self, "hub", None), getattr(self, "teleop", None)
+        return {
+            "clients": len(hub.listeners) if hub else 0,
+            "frames_in": hub.counts["frames_in"] if hub else 0,
+            **(teleop.counts if teleop else {}),
+            "estop": bool(hub.estop) if hub else False,
+        }
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        if exc.errno == errno.EADDRINUSE:
+            raise ConfigError(
+                f"web.port {port} on {host} is in use by another program; "
+                "stop it or set web.port in the profile"
+            ) from None
+        raise ConfigError(f"web: cannot listen on {host}:{port}: {exc.strerror}") from None
+    sock.listen(128)
+    sock.setblocking(False)
+    return sock
+
+
+def _keep_recent_logs() -> None:
+    """The admin page shows recent logs: make sure the ring buffer is attached."""
+    root = logging.getLogger("sage")
+    if RECENT not in root.handlers:
+        root.addHandler(RECENT)
+    if root.level == logging.NOTSET or root.level > logging.INFO:
+        root.setLevel(logging.INFO)
+
+
+class _QuietServer(uvicorn.Server):
+    """uvicorn without its signal handlers: the launcher owns SIGINT/SIGTERM."""
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Iterator[None]:
+        yield

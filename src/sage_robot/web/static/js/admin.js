@@ -1,0 +1,92 @@
+// Admin: knowledge base, places (list, add at the robot or a clicked point), node health, logs.
+import { $, api, el, healthRows, LiveSocket } from "./common.js";
+import { LiveMap } from "./livemap.js";
+
+const REFRESH_MS = 3000;
+
+async function loadPlaces() {
+  const { ok, data } = await api("/api/places");
+  if (!ok) return;
+  const body = $("places");
+  body.replaceChildren();
+  for (const p of data.places) {
+    body.append(el("tr", {}, el("td", {}, p.name), el("td", {}, `${p.x.toFixed(2)}, ${p.y.toFixed(2)}`),
+      el("td", {}, p.description)));
+  }
+}
+
+async function addPlace(extra) {
+  const body = {
+    name: $("p-name").value.trim(),
+    description: $("p-desc").value,
+    aliases: $("p-aliases").value,
+    ...extra,
+  };
+  const { ok, data } = await api("/api/admin/places", body);
+  $("place-msg").className = ok ? "ok" : "error";
+  $("place-msg").textContent = ok ? `added ${body.name} to ${data.file}` : data.error;
+  if (ok) loadPlaces();
+}
+
+$("add-place").addEventListener("submit", (ev) => {
+  ev.preventDefault();
+  addPlace({ x: Number($("p-x").value), y: Number($("p-y").value), theta: Number($("p-theta").value || 0) });
+});
+$("add-at-robot").addEventListener("click", () => addPlace({ at_robot: true }));
+
+const map = new LiveMap($("map"), {
+  onClick: (x, y) => {
+    $("p-x").value = x.toFixed(2);
+    $("p-y").value = y.toFixed(2);
+  },
+});
+new LiveSocket("/ws/live", { onMessage: (msg) => map.update(msg) });
+
+async function loadInfo() {
+  const { ok, data } = await api("/api/admin/info");
+  if (!ok) return;
+  $("waypoints-file").textContent = `— ${data.waypoints}`;
+  const kb = $("kb");
+  if (data.kb) {
+    kb.replaceChildren(el("p", { class: "muted" }, data.kb));
+    return;
+  }
+  const docs = await api("/api/kb/documents");
+  kb.replaceChildren();
+  if (!docs.ok) {
+    kb.append(el("p", { class: "error" }, docs.data.error || "the knowledge base does not answer"));
+    return;
+  }
+  const list = Array.isArray(docs.data) ? docs.data : docs.data.documents || [];
+  kb.append(el("p", {}, `${list.length} documents · `, el("a", { href: "/kb/admin" }, "manage documents")));
+  const ul = el("ul");
+  for (const d of list.slice(0, 50)) ul.append(el("li", {}, d.source || d.title || d.name || JSON.stringify(d)));
+  kb.append(ul);
+}
+
+async function refresh() {
+  const health = await api("/api/health");
+  if (health.ok) healthRows($("nodes"), health.data.nodes);
+  const logs = await api("/api/admin/logs?limit=200");
+  if (logs.ok) {
+    const box = $("logs");
+    box.replaceChildren(
+      ...logs.data.records.reverse().map((r) => {
+        const fields = Object.entries(r.fields).map(([k, v]) => `${k}=${v}`).join(" ");
+        const t = new Date(r.t * 1000).toLocaleTimeString();
+        return el("div", { class: r.level === "error" ? "error" : "" }, `${t} ${r.level} ${r.node} ${r.msg} ${fields}`);
+      }),
+    );
+  }
+}
+
+$("logout").addEventListener("click", async (ev) => {
+  ev.preventDefault();
+  await api("/api/logout", {});
+  location.href = "/";
+});
+
+loadInfo();
+loadPlaces();
+refresh();
+setInterval(refresh, REFRESH_MS);

@@ -1,0 +1,127 @@
+// Visitors' push-to-talk: hold the button (MediaRecorder WebM) or type; show and play the reply.
+import { $, api, el } from "./common.js";
+
+const MIN_RECORDING_MS = 300; // shorter presses are taps, not speech
+
+function say(who, text) {
+  $("conversation").prepend(el("div", { class: `bubble ${who}` }, text));
+}
+
+async function speak(text) {
+  try {
+    const resp = await fetch("/api/talk/say", {
+      method: "POST",
+      headers: { "Content-Type": "application/json" },
+      body: JSON.stringify({ text }),
+    });
+    if (!resp.ok) {
+      const data = await resp.json().catch(() => ({}));
+      $("status").textContent = data.error ? `(no voice: ${data.error})` : "";
+      return;
+    }
+    const url = URL.createObjectURL(await resp.blob());
+    const player = $("player");
+    player.src = url;
+    await player.play().catch(() => {});
+  } catch (err) {
+    $("status").textContent = `(no voice: ${err})`;
+  }
+}
+
+async function answer(result) {
+  const { ok, data } = result;
+  if (!ok) {
+    $("status").textContent = data.error || "SAGE could not answer";
+    return;
+  }
+  if (data.error) {
+    $("status").textContent = data.error;
+    return;
+  }
+  say("you", data.transcript);
+  say("sage", data.reply);
+  $("status").textContent = "";
+  document.body.dataset.replies = String(Number(document.body.dataset.replies || 0) + 1);
+  if (data.reply) speak(data.reply);
+}
+
+$("ask").addEventListener("submit", async (ev) => {
+  ev.preventDefault();
+  const text = $("question").value.trim();
+  if (!text) return;
+  $("question").value = "";
+  $("status").textContent = "thinking…";
+  answer(await api("/api/talk/text", { text }));
+});
+
+// ---------------------------------------------------------------- hold to talk
+let recorder = null;
+let chunks = [];
+let started = 0;
+let holding = false;
+
+async function startRecording() {
+  if (recorder) return;
+  if (!navigator.mediaDevices || !window.MediaRecorder) {
+    $("status").textContent = "this browser cannot record here (it needs https or localhost); type instead";
+    return;
+  }
+  try {
+    const stream = await navigator.mediaDevices.getUserMedia({ audio: true });
+    recorder = new MediaRecorder(stream, { mimeType: "audio/webm" });
+  } catch (err) {
+    $("status").textContent = `no microphone: ${err.message || err}`;
+    recorder = null;
+    return;
+  }
+  chunks = [];
+  started = performance.now();
+  if (!holding) started -= MIN_RECORDING_MS; // released while the microphone was opening
+  recorder.ondataavailable = (e) => e.data.size && chunks.push(e.data);
+  recorder.onstop = () => upload(recorder.stream);
+  recorder.start();
+  if (!holding) {
+    recorder.stop();
+    return;
+  }
+  $("ptt").classList.add("recording");
+  $("ptt").textContent = "Listening… release to send";
+}
+
+function stopRecording() {
+  holding = false;
+  if (!recorder || recorder.state !== "recording") return;
+  recorder.stop();
+}
+
+async function upload(stream) {
+  stream.getTracks().forEach((t) => t.stop());
+  const long = performance.now() - started >= MIN_RECORDING_MS;
+  recorder = null;
+  $("ptt").classList.remove("recording");
+  $("ptt").textContent = "Hold to talk";
+  if (!long) {
+    $("status").textContent = "hold the button while you speak";
+    return;
+  }
+  const form = new FormData();
+  form.append("audio", new Blob(chunks, { type: "audio/webm" }), "speech.webm");
+  $("status").textContent = "thinking…";
+  let result;
+  try {
+    const resp = await fetch("/api/talk/audio", { method: "POST", body: form });
+    result = { ok: resp.ok, data: await resp.json().catch(() => ({})) };
+  } catch (err) {
+    result = { ok: false, data: { error: `network: ${err}` } };
+  }
+  answer(result);
+}
+
+const ptt = $("ptt");
+ptt.addEventListener("pointerdown", (e) => {
+  e.preventDefault();
+  holding = true;
+  startRecording();
+});
+for (const ev of ["pointerup", "pointerleave", "pointercancel"]) ptt.addEventListener(ev, stopRecording);
+ptt.addEventListener("contextmenu", (e) => e.preventDefault());

@@ -1,0 +1,132 @@
+// Operator teleop: camera, driving, e-stop, live map, places, events.
+import { $, api, batteryText, el, LiveSocket } from "./common.js";
+import { Drive } from "./drive.js";
+import { LiveMap } from "./livemap.js";
+
+const CONFIRM_WINDOW_MS = 5000; // the "confirm release" button stays this long
+const MAX_EVENTS = 200;
+
+// ---------------------------------------------------------------- control link
+let estop = false;
+const teleop = new LiveSocket("/ws/teleop", {
+  onState: (up) => $("link").classList.toggle("up", up),
+  onMessage: (msg) => {
+    if (msg.type === "estop") showEstop(msg.engaged);
+    else if (msg.type === "error") $("teleop-error").textContent = msg.error;
+    else if (msg.type === "deadman") logEvent("teleop", msg.message);
+  },
+});
+const drive = new Drive(teleop, {
+  onCommand: (m) => ($("cmd").textContent = `${m.x.toFixed(2)}, ${m.z.toFixed(2)}`),
+});
+drive.bindKeys();
+drive.bindWheel($("wheel"));
+drive.bindPedal($("throttle"), "throttle");
+drive.bindPedal($("brake"), "brake");
+drive.bindJoystick($("joystick"), $("knob"));
+$("reverse").addEventListener("click", () => {
+  drive.reverse = !drive.reverse;
+  $("reverse").textContent = `R: ${drive.reverse ? "on" : "off"}`;
+});
+$("speed").addEventListener("input", () => {
+  drive.maxSpeed = Number($("speed").value);
+  $("speed-value").textContent = drive.maxSpeed.toFixed(2);
+});
+
+function showEstop(engaged) {
+  estop = engaged;
+  document.body.dataset.estop = String(engaged);
+  $("estop").classList.toggle("engaged", engaged);
+  $("estop-banner").classList.toggle("show", engaged);
+  $("confirm-release").hidden = true;
+  if (!engaged) $("teleop-error").textContent = "";
+}
+const engage = () => teleop.send({ type: "estop", engaged: true });
+$("estop").addEventListener("click", engage);
+window.addEventListener("keydown", (e) => {
+  if (e.code === "Space" && !(e.target instanceof HTMLInputElement)) {
+    e.preventDefault();
+    engage();
+  }
+});
+$("release").addEventListener("click", () => {
+  $("confirm-release").hidden = false;
+  setTimeout(() => ($("confirm-release").hidden = true), CONFIRM_WINDOW_MS);
+});
+$("confirm-release").addEventListener("click", () => {
+  if (estop) teleop.send({ type: "estop", engaged: false });
+});
+
+// ---------------------------------------------------------------- camera
+let frameUrl = null;
+new LiveSocket("/ws/camera", {
+  onBinary: (blob) => {
+    const url = URL.createObjectURL(blob);
+    $("camera").src = url;
+    if (frameUrl) URL.revokeObjectURL(frameUrl);
+    frameUrl = url;
+    $("camera-note").textContent = "";
+  },
+});
+
+// ---------------------------------------------------------------- live map and status
+async function goTo(body, label) {
+  const { ok, data } = await api("/api/goal", body);
+  $("goal-msg").textContent = ok ? `going to ${label}` : data.error;
+}
+const map = new LiveMap($("map"), {
+  onClick: (x, y) => goTo({ x, y, theta: 0 }, `(${x.toFixed(1)}, ${y.toFixed(1)})`),
+  onDrag: async (x, y, theta) => {
+    const { ok, data } = await api("/api/initial_pose", { x, y, theta });
+    $("goal-msg").textContent = ok ? `pose set to (${x.toFixed(1)}, ${y.toFixed(1)})` : data.error;
+  },
+});
+
+function logEvent(source, text) {
+  const log = $("events");
+  log.prepend(el("div", {}, `${new Date().toLocaleTimeString()} ${source}: ${text}`));
+  while (log.childElementCount > MAX_EVENTS) log.lastChild.remove();
+}
+
+new LiveSocket("/ws/live", {
+  onMessage: (msg) => {
+    map.update(msg);
+    switch (msg.type) {
+      case "battery":
+        $("battery").textContent = batteryText(msg);
+        break;
+      case "ui_state":
+        $("uistate").textContent = msg.phase;
+        break;
+      case "odom":
+        $("odom").textContent = `${msg.x.toFixed(2)}, ${msg.y.toFixed(2)} m`;
+        document.body.dataset.odomX = String(msg.x);
+        break;
+      case "nav":
+        $("nav").textContent = `${msg.state} ${msg.place || ""}`;
+        if (msg.done) logEvent("navigation", `${msg.state} ${msg.place || ""} ${msg.reason || ""}`);
+        break;
+      case "estop":
+        showEstop(msg.engaged);
+        break;
+      case "event":
+        logEvent(msg.source, `${msg.kind} ${msg.message}`);
+        break;
+    }
+  },
+});
+
+async function loadPlaces() {
+  const { ok, data } = await api("/api/places");
+  const box = $("places");
+  box.replaceChildren();
+  if (!ok) return;
+  for (const p of data.places) {
+    box.append(el("button", { title: p.description, onclick: () => goTo({ place: p.name }, p.name) }, p.name));
+  }
+}
+$("cancel").addEventListener("click", async () => {
+  await api("/api/cancel", {});
+  $("goal-msg").textContent = "navigation cancelled";
+});
+loadPlaces();

@@ -1,0 +1,123 @@
+"""Visitors' push-to-talk (the seed's web_ptt.py), public and rate-limited per address.
+
+- ``POST /api/talk/text`` ``{"text": "..."}`` → the brain's reply.
+- ``POST /api/talk/audio`` (multipart field ``audio``: the browser's MediaRecorder WebM)
+  → ffmpeg → 16 kHz → speech to text → the brain → ``{"transcript", "reply"}``.
+- ``POST /api/talk/say`` ``{"text": "..."}`` → the reply spoken, as ``audio/wav``.
+
+The brain is reached through the ``converse`` action; voice through
+``sage_robot.voice`` imported on first use. A missing part gives a 503 that names it
+("voice is not installed", "the brain is not running").
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from fastapi import APIRouter, HTTPException, Request, UploadFile
+from fastapi.responses import Response
+
+from sage_robot.core import topics
+from sage_robot.core.errors import SageError
+from sage_robot.core.log import get_logger
+from sage_robot.core.msgs import Text
+from sage_robot.web.common import client_key, json_body, state_of
+
+router = APIRouter()
+MAX_QUESTION_CHARS = 500
+MAX_SAY_CHARS = 2000
+MAX_UPLOAD_BYTES = 5 * 1024 * 1024  # about 5 minutes of Opus speech
+NOTHING_HEARD = "I did not hear any words; hold the button while you speak."
+CONVERSE_TIMEOUT_S = 60.0  # longest a reply may take (LLM + tools), wall s
+
+_log = get_logger("web")
+
+
+def _limit(request: Request) -> None:
+    st = state_of(request)
+    key = client_key(request)
+    if not st.talk_limiter.allow(key):
+        wait = int(st.talk_limiter.retry_after_s(key)) + 1
+        raise HTTPException(
+            status_code=429,
+            detail=f"too many questions; try again in {wait} s",
+            headers={"Retry-After": str(wait)},
+        )
+
+
+def _voice(module: str) -> Any:
+    import importlib
+
+    try:
+        return importlib.import_module(f"sage_robot.voice.{module}")
+    except ImportError as exc:
+        raise HTTPException(
+            status_code=503, detail=f"voice is not installed ({exc.name or module} is missing)"
+        ) from None
+
+
+async def converse(request: Request, question: str) -> str:
+    """Ask the brain; its whole reply."""
+    bus = state_of(request).node.bus
+    if not bus.actions.has(topics.CONVERSE):
+        raise HTTPException(status_code=503, detail="the brain is not running")
+    handle = await bus.actions.send_goal(topics.CONVERSE, Text(question))
+    try:
+        result = await asyncio.wait_for(handle.result(), CONVERSE_TIMEOUT_S)
+    except asyncio.TimeoutError:
+        await handle.cancel()
+        raise HTTPException(status_code=504, detail="the brain took too long to answer") from None
+    if not result.ok:
+        raise HTTPException(status_code=502, detail=f"the brain could not answer: {result.message}")
+    value = result.value
+    return value.data if isinstance(value, Text) else str(value or "")
+
+
+def _question(text: Any) -> str:
+    if not isinstance(text, str) or not text.strip():
+        raise HTTPException(status_code=422, detail="text: type a question")
+    if len(text) > MAX_QUESTION_CHARS:
+        raise HTTPException(status_code=422, detail=f"text: at most {MAX_QUESTION_CHARS} characters")
+    return " ".join(text.split())
+
+
+@router.post("/api/talk/text")
+async def talk_text(request: Request) -> dict[str, Any]:
+    _limit(request)
+    question = _question((await json_body(request)).get("text"))
+    reply = await converse(request, question)
+    _log.info("visitor question answered", client=client_key(request), chars=len(question))
+    return {"transcript": question, "reply": reply}
+
+
+@router.post("/api/talk/audio")
+async def talk_audio(request: Request, audio: UploadFile) -> dict[str, Any]:
+    _limit(request)
+    data = await audio.read(MAX_UPLOAD_BYTES + 1)
+    if len(data) > MAX_UPLOAD_BYTES:
+        raise HTTPException(status_code=413, detail=f"recording too long (over {MAX_UPLOAD_BYTES} bytes)")
+    audio_io, stt = _voice("audio_io"), _voice("stt")
+    try:
+        pcm = await asyncio.to_thread(audio_io.decode_upload, data, audio.filename or "recording")
+        transcript = await asyncio.to_thread(stt.transcribe_pcm, pcm)
+    except SageError as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None
+    if transcript.empty:
+        return {"transcript": "", "reply": "", "error": NOTHING_HEARD}
+    reply = await converse(request, transcript.text)
+    return {"transcript": transcript.text, "reply": reply}
+
+
+@router.post("/api/talk/say")
+async def talk_say(request: Request) -> Response:
+    _limit(request)
+    text = (await json_body(request)).get("text")
+    if not isinstance(text, str) or not text.strip() or len(text) > MAX_SAY_CHARS:
+        raise HTTPException(status_code=422, detail=f"text: 1..{MAX_SAY_CHARS} characters to speak")
+    tts, audio_io = _voice("tts"), _voice("audio_io")
+    try:
+        pcm, rate = await asyncio.to_thread(tts.synthesize, text)
+    except (SageError, ImportError, OSError) as exc:
+        raise HTTPException(status_code=503, detail=f"text to speech failed: {exc}") from None
+    return Response(audio_io.wav_bytes(pcm, rate), media_type="audio/wav")

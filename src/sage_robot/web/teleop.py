@@ -1,0 +1,133 @@
+"""Teleoperation: operator commands -> ``/cmd_vel``, with a deadman and a latching e-stop.
+
+- A control message ``{"type": "control", "x": m/s, "z": rad/s}`` is validated, clamped
+  to the robot's limits and published as a Twist at once (no batching: the key-to-motor
+  latency is what an operator feels).
+- **Deadman**: the page repeats a held command every :data:`CLIENT_REPEAT_S`; if no
+  control message arrives for ``web.deadman_s`` while the last command was non-zero, a
+  zero Twist is published. Closing the socket of the operator who drove last publishes
+  a zero Twist at once. The deadman runs on wall time on purpose: it guards against a
+  network that went quiet, which happens in real seconds even when the simulator runs
+  faster than real time.
+- **E-stop** latches: while engaged every control message is refused with an error
+  reply, a zero Twist is published and navigation is cancelled. Only an explicit
+  ``{"type": "estop", "engaged": false}`` from a logged-in operator releases it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from typing import Any
+
+from sage_robot.core import topics
+from sage_robot.core.log import get_logger
+from sage_robot.core.msgs import Event, Twist
+from sage_robot.core.node import Node
+
+CLIENT_REPEAT_S = 0.1  # the page re-sends a held command this often (s); documented for pages
+DEADMAN_CHECK_S = 0.05  # how often the deadman looks at the last command time (s)
+
+_log = get_logger("web")
+
+
+class BadMessage(ValueError):
+    """A client message that cannot be used; the text goes back to the client."""
+
+
+def parse_control(msg: dict[str, Any]) -> tuple[float, float]:
+    """``x`` (m/s) and ``z`` (rad/s) from a control message; finite numbers only."""
+    out = []
+    for key in ("x", "z"):
+        value = msg.get(key, 0.0)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise BadMessage(f"control: {key!r} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise BadMessage(f"control: {key!r} must be finite, got {value!r}")
+        out.append(float(value))
+    return out[0], out[1]
+
+
+class Teleop:
+    """Shared by every teleop socket of the web node (the last operator to send drives)."""
+
+    def __init__(self, node: Node, hub: Any) -> None:
+        self.node, self.hub = node, hub
+        self.bus, self.clock = node.bus, node.clock
+        robot = node.settings.robot
+        self.max_v, self.max_w = robot.max_linear_mps, robot.max_angular_radps
+        self.deadman_s = node.settings.web.deadman_s
+        self.command = (0.0, 0.0)
+        self.last_control = 0.0  # time.monotonic() of the last control message
+        self.driver: object | None = None
+        self.counts = {"controls": 0, "deadman_stops": 0, "close_stops": 0, "refused": 0}
+
+    def start(self) -> None:
+        self.node.spawn(self._deadman_loop(), "web.deadman")
+
+    @property
+    def estop(self) -> bool:
+        return bool(self.hub.estop)
+
+    def control(self, client: object, x: float, z: float) -> tuple[float, float]:
+        """Apply a command from ``client``; raises BadMessage while the e-stop is engaged."""
+        if self.estop:
+            self.counts["refused"] += 1
+            self._publish(0.0, 0.0)
+            raise BadMessage("e-stop is engaged: release it before driving")
+        v = max(-self.max_v, min(self.max_v, x))
+        w = max(-self.max_w, min(self.max_w, z))
+        self.driver, self.last_control = client, time.monotonic()
+        self.counts["controls"] += 1
+        self._publish(v, w)
+        return v, w
+
+    def release_client(self, client: object) -> None:
+        """The socket of ``client`` closed: stop if it was driving."""
+        if self.driver is client:
+            self.driver = None
+            if self.command != (0.0, 0.0):
+                self.counts["close_stops"] += 1
+                _log.info("teleop socket closed while driving: stopping")
+            self._publish(0.0, 0.0)
+
+    async def set_estop(self, engaged: bool, who: str) -> None:
+        if engaged == self.estop:
+            return
+        self.hub.estop = engaged
+        self.hub.set("estop", {"type": "estop", "engaged": engaged})
+        self.bus.publish(
+            topics.EVENTS,
+            Event(self.clock.now(), "web", "estop" if engaged else "estop_released", f"by {who}"),
+        )
+        _log.warning("e-stop engaged" if engaged else "e-stop released", by=who)
+        if engaged:
+            self._publish(0.0, 0.0)
+            await self.cancel_navigation()
+
+    async def cancel_navigation(self) -> None:
+        active = self.bus.actions.active(topics.NAVIGATE_TO)
+        if active is not None:
+            with contextlib.suppress(Exception):
+                await active.cancel()
+        if self.bus.has_service(topics.CANCEL_NAV):
+            with contextlib.suppress(Exception):
+                await self.bus.call(topics.CANCEL_NAV, None, timeout=1.0)
+
+    def _publish(self, v: float, w: float) -> None:
+        self.command = (v, w)
+        self.bus.publish(topics.CMD_VEL, Twist(v, w))
+
+    async def _deadman_loop(self) -> None:
+        while True:
+            await asyncio.sleep(DEADMAN_CHECK_S)
+            silent = time.monotonic() - self.last_control
+            if self.command != (0.0, 0.0) and self.driver is not None and silent > self.deadman_s:
+                self.counts["deadman_stops"] += 1
+                _log.info("deadman: no control message, stopping", silent_s=round(silent, 2))
+                self._publish(0.0, 0.0)
+                self.hub.set(
+                    "teleop", {"type": "deadman", "message": "no command from the operator: stopped"}
+                )
