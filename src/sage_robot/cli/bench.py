@@ -11,6 +11,7 @@ BENCHMARKS: dict[str, str] = {
     "bus": "sage_robot.bench.bus",
     "kb": "sage_robot.bench.kb",
     "mcu": "sage_robot.bench.mcu",
+    "brain": "sage_robot.bench.brain",
 }
 
 
@@ -19,11 +20,22 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(help_parser=p)
     bsub = p.add_subparsers(dest="bench", metavar="NAME")
     for name, module_name in BENCHMARKS.items():
-        module = importlib.import_module(module_name)
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as exc:  # an extra is not installed: say so when it is asked for
+            bp = bsub.add_parser(name, help=f"(unavailable: {exc})")
+            bp.set_defaults(func=lambda a, e=exc, n=name: _unavailable(n, e))
+            continue
         bp = bsub.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0])
         bp.add_argument("--json", action="store_true", help="print only the JSON line")
         module.add_arguments(bp)
         bp.set_defaults(func=lambda a, m=module: _run(m, a))
+
+
+def _unavailable(name: str, exc: ImportError) -> int:
+    from sage_robot.core.errors import SageError
+
+    raise SageError(f"benchmark {name!r} cannot run: {exc}; install it with: pip install 'sage-robot[all]'")
 
 
 def _run(module: object, args: argparse.Namespace) -> int:

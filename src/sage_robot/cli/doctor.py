@@ -3,53 +3,32 @@
 from __future__ import annotations
 
 import argparse
-import platform
-import sys
-from collections.abc import Callable
-from dataclasses import dataclass
+import json
 
 from sage_robot.core.config import load_profile
 from sage_robot.core.errors import ConfigError
 
 
-@dataclass
-class Check:
-    name: str
-    ok: bool
-    detail: str
-    fix: str = ""
-    essential: bool = True
-
-
-def check_python() -> Check:
-    ok = sys.version_info >= (3, 10)
-    return Check("python", ok, platform.python_version(), "install Python 3.10 or newer")
-
-
-def check_profile(path: str | None) -> Check:
-    try:
-        load_profile(path)
-        return Check("profile", True, path or "built-in simulated robot")
-    except ConfigError as exc:
-        return Check("profile", False, str(exc), "fix the profile as the message says")
-
-
-CHECKS: list[Callable[[argparse.Namespace], Check]] = [
-    lambda a: check_python(),
-    lambda a: check_profile(a.profile),
-]
-
-
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser("doctor", help="check devices, models, ports and network; explain fixes")
+    p.add_argument("--json", action="store_true", help="print the checks as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    results = [c(args) for c in CHECKS]
-    for r in results:
-        mark = "ok  " if r.ok else ("FAIL" if r.essential else "warn")
-        print(f"[{mark}] {r.name:<12} {r.detail}")
-        if not r.ok and r.fix:
-            print(f"       fix: {r.fix}")
+    from sage_robot.app.doctor import Check, run_checks
+
+    try:
+        settings = load_profile(args.profile)
+    except ConfigError as exc:
+        results = [Check("profile", False, str(exc), "fix the profile as the message says")]
+    else:
+        results = [Check("profile", True, args.profile or "built-in simulated robot"), *run_checks(settings)]
+    if args.json:
+        print(json.dumps([r.__dict__ for r in results], indent=2))
+    else:
+        for r in results:
+            print(f"[{r.mark:<4}] {r.name:<8} {r.detail}")
+            if not r.ok and r.fix:
+                print(f"               fix: {r.fix}")
     return 1 if any(not r.ok and r.essential for r in results) else 0

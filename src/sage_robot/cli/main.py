@@ -24,7 +24,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--log-level", default="INFO", help="DEBUG, INFO, WARNING or ERROR")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        importlib.import_module(f"sage_robot.cli.{name}").register(sub)
+        try:
+            module = importlib.import_module(f"sage_robot.cli.{name}")
+        except ImportError as exc:  # a missing extra must not take the whole command down
+            print(f"sage: the '{name}' commands are unavailable: {exc}", file=sys.stderr)
+            continue
+        module.register(sub)
     return parser
 
 
