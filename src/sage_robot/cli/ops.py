@@ -55,6 +55,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--json", action="store_true", help="print the raw JSON")
     p.set_defaults(func=run_status)
 
+    p = sub.add_parser("profile-from-urdf", help="print profile lines (lidar pose, track) from a URDF/xacro")
+    p.add_argument("file", help="the robot's .urdf or .urdf.xacro")
+    p.add_argument("--lidar-link", default="lidar_link")
+    p.add_argument("--base-link", default="base_link")
+    p.set_defaults(func=run_profile_from_urdf)
+
     p = sub.add_parser("install-service", help="write a systemd unit so the robot starts at boot")
     p.add_argument("--mode", default="tour", choices=["tour", "slam"])
     p.add_argument("--out", default="/etc/systemd/system/sage.service", help="where to write the unit")
@@ -131,4 +137,13 @@ def run_install_service(args: argparse.Namespace) -> int:
     print(f"wrote {out}")
     print("enable it with: sudo systemctl daemon-reload && sudo systemctl enable --now sage")
     print("the robot starts at boot from its dock, where its initial pose is (nav.initial_place)")
+    return 0
+
+
+def run_profile_from_urdf(args: argparse.Namespace) -> int:
+    from sage_robot.app.urdf import read_geometry
+
+    geo = read_geometry(args.file, lidar_link=args.lidar_link, base_link=args.base_link)
+    print(f"# from {args.file}: paste into your profile")
+    print(geo.profile_yaml(), end="")
     return 0
