@@ -18,7 +18,8 @@ SEED_LIKE = """<?xml version="1.0"?>
     <parent link="base_link"/><child link="chassis"/><origin xyz="0 0 0.1" rpy="0 0 0"/>
   </joint>
   <joint name="lidar_joint" type="fixed">
-    <parent link="chassis"/><child link="lidar_link"/><origin xyz="${lidar_x} 0 ${lidar_h - 0.1}" rpy="0 0 ${pi}"/>
+    <parent link="chassis"/><child link="lidar_link"/>
+    <origin xyz="${lidar_x} 0 ${lidar_h - 0.1}" rpy="0 0 ${pi}"/>
   </joint>
   <joint name="left_wheel_joint" type="continuous">
     <parent link="base_link"/><child link="left_wheel"/><origin xyz="0 ${track/2} 0" rpy="${-pi/2} 0 0"/>
