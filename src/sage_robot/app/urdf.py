@@ -22,7 +22,7 @@ from typing import Any
 from sage_robot.core.errors import ConfigError
 
 XACRO_NS = "http://www.ros.org/wiki/xacro"
-_OPS = {
+_OPS: dict[type, Any] = {
     ast.Add: operator.add,
     ast.Sub: operator.sub,
     ast.Mult: operator.mul,
