@@ -62,3 +62,18 @@ async def test_request_stop_ends_run():
     launcher.request_stop()
     await asyncio.wait_for(runner, 2)
     assert launcher.health["steady"].state is NodeState.STOPPED
+
+
+async def test_health_shows_each_nodes_topic_rates():
+    from sage_robot.app.builtin import HeartbeatNode
+
+    clock = SimClock()
+    ctx = NodeContext(Bus(clock), clock, load_profile())
+    launcher = Launcher(ctx, [NodeSpec("heartbeat", HeartbeatNode), NodeSpec("steady", Steady)])
+    await launcher.start()
+    for _ in range(500):  # 5 simulated seconds
+        await clock.step(0.01)
+    report = launcher.health_report()
+    assert report["heartbeat"]["topics"]["/sage/heartbeat"] == 1.0
+    assert report["steady"]["topics"] == {}
+    await launcher.stop()

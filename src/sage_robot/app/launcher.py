@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from sage_robot.core.bus import Bus
 from sage_robot.core.log import get_logger
 from sage_robot.core.msgs import DiagnosticArray, DiagnosticStatus, Event, Level, Twist
-from sage_robot.core.node import Health, Node, NodeContext, NodeState
+from sage_robot.core.node import CURRENT_NODE, Health, Node, NodeContext, NodeState
 
 BACKOFF_INITIAL_S = 0.5
 BACKOFF_MAX_S = 10.0
@@ -54,13 +54,15 @@ class Launcher:
         self.ctx, self.specs = ctx, specs
         self.bus: Bus = ctx.bus
         self.log = get_logger("launcher")
-        self.health: dict[str, Health] = {
-            s.name: Health(s.name, critical=s.critical) for s in specs
-        }
+        self.health: dict[str, Health] = {s.name: Health(s.name, critical=s.critical) for s in specs}
         self.nodes: dict[str, Node] = {}
         self._tasks: dict[str, asyncio.Task[None]] = {}
         self._stopping = False
         self._stop_event = asyncio.Event()
+        self._published: dict[tuple[str, str], int] = {}  # (node, topic) -> messages
+        self._rates: dict[tuple[str, str], float] = {}  # (node, topic) -> Hz over the last period
+        self._rate_base: tuple[float, dict[tuple[str, str], int]] = (ctx.clock.now(), {})
+        self._remove_tap = ctx.bus.add_tap(self._count)
         ctx.resources["launcher"] = self
 
     # ---------------------------------------------------------------- public
@@ -70,9 +72,7 @@ class Launcher:
             self._tasks[spec.name] = asyncio.get_running_loop().create_task(
                 self._supervise(spec), name=f"supervise:{spec.name}"
             )
-        self._diag = self.ctx.clock.every(
-            DIAGNOSTICS_PERIOD_S, self._publish_diagnostics, "diagnostics"
-        )
+        self._diag = self.ctx.clock.every(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics, "diagnostics")
 
     async def run(self) -> None:
         """Start, then wait until :meth:`request_stop` (or a signal), then stop cleanly."""
@@ -102,15 +102,34 @@ class Launcher:
                     await task
             self.health[spec.name].state = NodeState.STOPPED
         self._publish_diagnostics()
+        self._remove_tap()
 
     def health_report(self) -> dict[str, dict[str, object]]:
+        """Every node: state, restarts, last error, its own stats and its topics' rates (Hz)."""
         for name, node in self.nodes.items():
             with contextlib.suppress(Exception):
                 self.health[name].stats = node.stats()
-        return {name: h.as_dict() for name, h in self.health.items()}
+        return {name: {**h.as_dict(), "topics": self.topic_rates(name)} for name, h in self.health.items()}
 
     # ---------------------------------------------------------------- internals
+    def _count(self, topic: str, msg: object) -> None:
+        key = (CURRENT_NODE.get(), topic)
+        self._published[key] = self._published.get(key, 0) + 1
+
+    def _update_rates(self) -> None:
+        now = self.ctx.clock.now()
+        t0, base = self._rate_base
+        if now - t0 <= 0:
+            return
+        self._rates = {k: (n - base.get(k, 0)) / (now - t0) for k, n in self._published.items()}
+        self._rate_base = (now, dict(self._published))
+
+    def topic_rates(self, node: str = "") -> dict[str, float]:
+        """Hz of the topics a node published over the last diagnostics period."""
+        return {t: round(hz, 2) for (n, t), hz in self._rates.items() if n == node}
+
     async def _supervise(self, spec: NodeSpec) -> None:
+        CURRENT_NODE.set(spec.name)  # this task's context: inherited by everything the node creates
         health = self.health[spec.name]
         backoff = BACKOFF_INITIAL_S
         clock = self.ctx.clock
@@ -168,12 +187,11 @@ class Launcher:
         self.bus.publish("/cmd_vel", Twist())
         self.bus.publish(
             "/sage/events",
-            Event(
-                self.ctx.clock.now(), "launcher", "safety_stop", f"{spec.name} is down: {reason}"
-            ),
+            Event(self.ctx.clock.now(), "launcher", "safety_stop", f"{spec.name} is down: {reason}"),
         )
 
     def _publish_diagnostics(self) -> None:
+        self._update_rates()
         report = self.health_report()
         status = tuple(
             DiagnosticStatus(

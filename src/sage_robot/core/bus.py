@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import contextvars
 import inspect
 import logging
 import threading
@@ -179,9 +180,7 @@ class Bus:
         if info is None:
             info = self._topics[name] = TopicInfo(name, msg_type, latched)
         elif info.msg_type is not msg_type:
-            raise TypeError(
-                f"topic {name} carries {info.msg_type.__name__}, not {msg_type.__name__}"
-            )
+            raise TypeError(f"topic {name} carries {info.msg_type.__name__}, not {msg_type.__name__}")
         info.latched = info.latched or latched
         return info
 
@@ -189,9 +188,7 @@ class Bus:
         """Publish on this loop's thread. Other threads use :meth:`publish_threadsafe`."""
         info = self._topics.get(name) or self.declare(name, type(msg))
         if not isinstance(msg, info.msg_type):
-            raise TypeError(
-                f"topic {name} carries {info.msg_type.__name__}, got {type(msg).__name__}"
-            )
+            raise TypeError(f"topic {name} carries {info.msg_type.__name__}, got {type(msg).__name__}")
         self._bind_loop()
         self._deliver_local(name, msg)
         self.transport.send(name, msg)
@@ -202,7 +199,8 @@ class Bus:
             self.publish(name, msg)
         elif not self._loop.is_closed():
             with contextlib.suppress(RuntimeError):  # the loop closed in between: shutting down
-                self._loop.call_soon_threadsafe(self.publish, name, msg)
+                # Carry the publishing thread's context (which node it belongs to) along.
+                self._loop.call_soon_threadsafe(self.publish, name, msg, context=contextvars.copy_context())
 
     def _deliver_local(self, name: str, msg: Any) -> None:
         info = self._topics.get(name) or self.declare(name, type(msg))
@@ -259,9 +257,7 @@ class Bus:
     def has_service(self, name: str) -> bool:
         return name in self._services
 
-    async def call(
-        self, name: str, request: Any, timeout: float | None = DEFAULT_SERVICE_TIMEOUT_S
-    ) -> Any:
+    async def call(self, name: str, request: Any, timeout: float | None = DEFAULT_SERVICE_TIMEOUT_S) -> Any:
         """Call a service; errors and time-outs raise :class:`ServiceError` subclasses."""
         info = self._services.get(name)
         if info is None:

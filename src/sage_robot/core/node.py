@@ -10,6 +10,8 @@ raises, the node fails and the launcher restarts it.
 from __future__ import annotations
 
 import asyncio
+import contextvars
+import threading
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from enum import Enum
@@ -19,6 +21,11 @@ from sage_robot.core.bus import Bus, Subscription
 from sage_robot.core.clock import Clock, Timer
 from sage_robot.core.config import Settings
 from sage_robot.core.log import StructLogger, get_logger
+
+# The node whose code is running: set by the launcher in each node's task, inherited by the
+# tasks, timers, subscriptions and (through Node.start_thread) threads the node creates, so
+# every publication can be attributed to its node for the health record's topic rates.
+CURRENT_NODE: contextvars.ContextVar[str] = contextvars.ContextVar("sage_current_node", default="")
 
 
 class NodeState(str, Enum):
@@ -103,6 +110,15 @@ class Node:
         task = asyncio.get_running_loop().create_task(coro, name=name or f"{self.name}.task")
         self._tasks.append(task)
         return task
+
+    def start_thread(self, target: Callable[[], Any], name: str = "") -> threading.Thread:
+        """A daemon thread (a driver's RX loop) that publishes as this node."""
+        ctx = contextvars.copy_context()
+        thread = threading.Thread(
+            target=ctx.run, args=(target,), name=name or f"{self.name}.thread", daemon=True
+        )
+        thread.start()
+        return thread
 
     def subscribe(
         self,

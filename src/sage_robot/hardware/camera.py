@@ -81,8 +81,7 @@ class CameraNode(Node):
 
     async def setup(self) -> None:
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._grab, name="camera", daemon=True)
-        self._thread.start()
+        self._thread = self.start_thread(self._grab, "camera")
 
     def _grab(self) -> None:
         cfg = self.settings.camera

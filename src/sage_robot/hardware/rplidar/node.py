@@ -25,8 +25,7 @@ class LidarNode(Node):
         self.device = ""
         self.driver: RplidarDriver | None = None
         self._loop = asyncio.get_running_loop()
-        self._thread = threading.Thread(target=self._rx, name="lidar-rx", daemon=True)
-        self._thread.start()
+        self._thread = self.start_thread(self._rx, "lidar-rx")
         self.spawn(self._watch_thread())
 
     async def _watch_thread(self) -> None:
