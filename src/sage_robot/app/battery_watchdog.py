@@ -78,9 +78,18 @@ def default_mailer(node: Node) -> MailSender | None:
     email = node.settings.email
     if not email.smtp_host or not email.recipients:
         return None
-    from sage_robot.app.mailer import SmtpMailer
+    from sage_robot.kb.mail import send_mail_async
 
-    return SmtpMailer(email, node.settings.secrets_file).send
+    async def send(subject: str, body: str) -> bool:
+        # One attempt per call: the watchdog retries on its own clock.
+        result = await send_mail_async(
+            email, subject, body, key_file=node.settings.secrets_file or None, attempts=1
+        )
+        if not result.ok:
+            node.log.warning("battery e-mail not sent", error=result.error)
+        return result.ok
+
+    return send
 
 
 class BatteryWatchdogNode(Node):
