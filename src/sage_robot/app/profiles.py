@@ -9,6 +9,7 @@ from __future__ import annotations
 PROFILES: dict[str, list[tuple[str, bool]]] = {
     # The whole system on the simulated robot in the simulated building.
     "sim": [
+        ("sim_world", True),
         ("mcu_sim", True),
         ("heartbeat", False),
         ("battery_watchdog", False),

@@ -10,6 +10,7 @@ from sage_robot.core.node import Node
 
 NODES: dict[str, str] = {
     "heartbeat": "sage_robot.app.builtin:HeartbeatNode",
+    "sim_world": "sage_robot.sim.node:WorldNode",
     "kb": "sage_robot.kb.node:KbNode",
     "battery_watchdog": "sage_robot.app.battery_watchdog:BatteryWatchdogNode",
     "lidar": "sage_robot.hardware.rplidar.node:LidarNode",

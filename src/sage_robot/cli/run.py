@@ -1,21 +1,38 @@
-"""`sage sim` and `sage up`: start the robot's nodes, simulated or real."""
+"""`sage sim` and `sage up`: start the robot's nodes, simulated or real.
+
+``sage sim`` runs every node of the "sim" profile on the simulated clock (real time by
+default, ``--speed N`` or ``--fast``) and prints the web pages' addresses.
+``sage sim --headless --scenario FILE`` runs a scenario without the web server and
+prints a summary (collisions, distance, time) when it ends.
+"""
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib
+import json
+import time
+from typing import Any
 
 from sage_robot.app.runtime import make_context, run_launcher, specs_for
-from sage_robot.core.config import load_profile
+from sage_robot.core.config import Settings, load_profile
+from sage_robot.core.errors import ConfigError
+
+HEADLESS_SKIP = {"web"}  # nodes a headless run leaves out
+WEB_NODE = "web"
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser("sim", help="start the whole system on the simulated robot (default demo)")
     p.add_argument("--speed", type=float, help="real-time factor (default from the profile: 1)")
     p.add_argument("--fast", action="store_true", help="run as fast as the machine allows")
-    p.add_argument("--headless", action="store_true", help="no web server; print a summary")
+    p.add_argument("--headless", action="store_true", help="no web server; print a summary at the end")
+    p.add_argument("--scenario", help="scenario YAML (people, clutter, start, timed events)")
     p.add_argument("--duration", type=float, help="stop after this many simulated seconds")
     p.add_argument("--seed", type=int, help="world random seed")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
+    p.add_argument("--nodes", help="run only these nodes of the sim profile (comma-separated)")
     p.set_defaults(func=run_sim)
 
     p = sub.add_parser("up", help="start the real robot's nodes from the profile")
@@ -23,22 +40,108 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(func=run_up)
 
 
-def run_sim(args: argparse.Namespace) -> int:
+def _merge(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, value in extra.items():
+        out[key] = (
+            _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+        )
+    return out
+
+
+def _overrides(args: argparse.Namespace, scenario: Any) -> dict[str, Any]:
     sim: dict[str, object] = {}
     if args.speed is not None:
+        if args.speed <= 0:
+            raise ConfigError(f"--speed must be > 0, got {args.speed}")
         sim["speed"] = args.speed
     if args.fast:
         sim["speed"] = None
     if args.seed is not None:
         sim["seed"] = args.seed
-    settings = load_profile(args.profile, {"sim": sim} if sim else None)
+    base = scenario.settings_overrides() if scenario is not None else {}
+    return _merge(base, {"sim": sim} if sim else {})
+
+
+def web_addresses(settings: Settings) -> list[str]:
+    """The pages the web node serves, as URLs on this machine."""
+    base = f"http://localhost:{settings.web.port}"
+    try:
+        app = importlib.import_module("sage_robot.web.app")
+        pages = list(getattr(app, "PUBLIC_PAGES", {})) + list(getattr(app, "OPERATOR_PAGES", {}))
+    except ImportError:
+        pages = ["/"]
+    return [f"{base}{p}" for p in pages if p != "/login"] or [f"{base}/"]
+
+
+def run_sim(args: argparse.Namespace) -> int:
+    from sage_robot.sim.node import SCENARIO_RESOURCE, SUMMARY_RESOURCE, WORLD_RESOURCE
+    from sage_robot.sim.scenario import load_scenario
+
+    scenario = load_scenario(args.scenario) if args.scenario else None
+    settings = load_profile(args.profile, _overrides(args, scenario) or None)
+    duration = args.duration if args.duration is not None else (scenario.duration_s if scenario else None)
+    if duration is not None and duration <= 0:
+        raise ConfigError(f"--duration must be > 0 s, got {duration}")
     ctx = make_context(settings, simulated=True)
-    specs = specs_for("sim")
-    print(f"SAGE simulator: {len(specs)} nodes; Ctrl-C to stop")
-    launcher = asyncio.run(run_launcher(ctx, specs, until=args.duration))
-    bad = [n for n, h in launcher.health.items() if h.restarts]
-    print(f"simulated {ctx.clock.now():.1f} s; nodes restarted: {', '.join(bad) or 'none'}")
-    return 0
+    if scenario is not None:
+        ctx.resources[SCENARIO_RESOURCE] = scenario
+    specs = [s for s in specs_for("sim") if not (args.headless and s.name in HEADLESS_SKIP)]
+    if args.nodes:
+        wanted = [n.strip() for n in args.nodes.split(",") if n.strip()]
+        unknown = sorted(set(wanted) - {s.name for s in specs})
+        if unknown:
+            raise ConfigError(
+                f"--nodes: {', '.join(unknown)} not in the sim profile; it has "
+                f"{', '.join(s.name for s in specs)}"
+            )
+        specs = [s for s in specs if s.name in wanted]
+    names = [s.name for s in specs]
+    speed = "as fast as possible" if settings.sim.speed is None else f"{settings.sim.speed:g}x real time"
+    if not args.json:
+        print(f"SAGE simulator: {len(specs)} nodes ({', '.join(names)}), {speed}; Ctrl-C to stop")
+        if WEB_NODE in names:
+            print("web pages:")
+            for url in web_addresses(settings):
+                print(f"  {url}")
+    wall0 = time.monotonic()
+    launcher = asyncio.run(run_launcher(ctx, specs, until=duration))
+    wall = time.monotonic() - wall0
+    world = ctx.resources.get(WORLD_RESOURCE)
+    sim_t = ctx.clock.now()
+    summary: dict[str, Any] = {
+        "scenario": scenario.name if scenario else None,
+        "sim_time_s": round(sim_t, 3),
+        "wall_time_s": round(wall, 3),
+        "real_time_factor": round(sim_t / wall, 2) if wall > 0 else None,
+        "nodes_restarted": sorted(n for n, h in launcher.health.items() if h.restarts),
+        "nodes_failed": sorted(n for n, h in launcher.health.items() if h.last_error),
+    }
+    if world is not None:
+        ws = world.summary()
+        ws.pop("sim_time_s", None)
+        summary.update(ws)
+    summary["goals"] = ctx.resources.get(SUMMARY_RESOURCE, {}).get("goals", [])
+    _print_summary(summary, args.json)
+    return 0 if world is not None else 1
+
+
+def _print_summary(summary: dict[str, Any], as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(summary))
+        return
+    print(
+        f"simulated {summary['sim_time_s']:.1f} s in {summary['wall_time_s']:.1f} s "
+        f"({summary['real_time_factor']}x real time)"
+    )
+    if "distance_m" in summary:
+        print(
+            f"robot drove {summary['distance_m']:.2f} m, collisions: {summary['collisions']} "
+            f"{summary['collisions_by_kind'] or ''}, final pose {summary['pose']}"
+        )
+    for goal in summary["goals"]:
+        print(f"goal {goal['goal']}: {goal.get('status', 'running')} {goal.get('message', '')}".rstrip())
+    print(f"nodes restarted: {', '.join(summary['nodes_restarted']) or 'none'}")
 
 
 def run_up(args: argparse.Namespace) -> int:

@@ -40,3 +40,5 @@ CONVERSE = "converse"  # action: Text (what the visitor said) -> feedback Text (
 #   to speak, as it streams) -> result Text (the whole reply). Served by the brain.
 HEARD = "/sage/heard"  # Text: final transcript of a visitor turn (voice -> anyone)
 LOC_HEALTH = "/localization/health"  # nav.LocalizationHealth
+SIM_SPEAKER_BEARING = "/sim/speaker_bearing"  # voice.Doa: simulated visitor's bearing (truth)
+SIM_SPEAKER = "/sim/speaker"  # sim.SpeakerBearing: nearest person within 3 m (or none), with distance

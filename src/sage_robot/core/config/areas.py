@@ -15,6 +15,12 @@ class SimSettings(Section):
     speed: float | None = Field(1.0, description="Real-time factor; null = as fast as possible.")
     seed: int = Field(7, description="Random seed of the world (people, noise).")
     pedestrians: int = Field(6, ge=0, description="Simulated people walking about.")
+    clutter: bool = Field(True, description="Place the building's low benches and carts (world.yaml).")
+    lidar_beams: int = Field(360, ge=8, le=4096, description="Simulated lidar beams per revolution.")
+    lidar_dropout: float = Field(0.01, ge=0, le=1, description="Chance a beam returns nothing (0..1).")
+    camera_hz: float = Field(
+        15.0, ge=0, description="Camera frames per second of wall time (0 = no camera)."
+    )
 
 
 class NavSettings(Section):

@@ -1,0 +1,198 @@
+"""The world node ("sim_world"): owns the simulated world and publishes what it senses.
+
+At the very start of ``setup`` (before any ``await``) it puts the :class:`World` in
+``ctx.resources["sim_world"]``; the simulated MCU ("mcu_sim") finds it there and moves
+``world.body`` by the firmware model's wheel speeds. Its own physics hook (in
+``ctx.resources[SIM_STEP_HOOKS]``) steps the people every 10 ms and publishes, on the
+simulated clock: the lidar scan (10 Hz, ``/scan``), ground truth (50 Hz,
+``/sim/ground_truth``), people and the speaker's bearing (10 Hz), collisions as they
+happen, and camera frames (``camera_hz`` frames per *wall* second: an operator watches
+in real time, so a 50x run does not render 50x the frames).
+
+With no "mcu_sim" node in the launch, it drives the body itself from ``/cmd_vel``
+(ideal tracking, the MCU's 0.55 s watchdog), so a world-only run still moves.
+It also plays a scenario's timed events (``ctx.resources["sim_scenario"]``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from sage_robot.core import topics
+from sage_robot.core.errors import ConfigError
+from sage_robot.core.msgs import Event, Odometry, Pose2D, Text, Twist
+from sage_robot.core.msgs.voice import Doa
+from sage_robot.core.node import Node
+from sage_robot.sim.scenario import Scenario, TimedEvent
+from sage_robot.sim.setup import build_world
+from sage_robot.sim.world import Collision, World
+
+WORLD_RESOURCE = "sim_world"  # ctx.resources key of the World
+SCENARIO_RESOURCE = "sim_scenario"  # ctx.resources key of the Scenario being run (optional)
+SUMMARY_RESOURCE = "sim_summary"  # ctx.resources key: dict of scenario goal results etc.
+SIM_STEP_HOOKS = "sim_step_hooks"  # = app.runtime.SIM_STEP_HOOKS (app imports sim, not back)
+MCU_NODE = "mcu_sim"
+TRUTH_HZ = 50.0
+PEOPLE_HZ = 10.0
+WATCHDOG_S = 0.55  # as the MCU firmware: a command older than this stops the body
+CMD_RESEND_S = 0.05  # a scenario's standing /cmd_vel is re-sent at 20 Hz
+EVENT_SOURCE = "sim"
+
+
+class WorldNode(Node):
+    name = "sim_world"
+
+    async def setup(self) -> None:
+        if not self.clock.is_simulated:
+            raise ConfigError("the simulated world needs the simulated clock (`sage sim`)")
+        self.scenario: Scenario | None = self.ctx.resources.get(SCENARIO_RESOURCE)
+        world = self.ctx.resources.get(WORLD_RESOURCE)
+        if not isinstance(world, World):  # a restart keeps the world (and the robot's pose)
+            world = build_world(self.settings, self.scenario)
+            self.ctx.resources[WORLD_RESOURCE] = world
+        self.world: World = world
+        self.world.on_collision[:] = [self._on_collision]
+        self.summary: dict[str, Any] = self.ctx.resources.setdefault(SUMMARY_RESOURCE, {"goals": []})
+        self._hooks: list[Any] = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
+        self._hooks.insert(0, self._physics)
+        launcher = self.ctx.resources.get("launcher")
+        names = [s.name for s in getattr(launcher, "specs", [])]
+        self.direct_drive = MCU_NODE not in names
+        self._cmd, self._cmd_t = Twist(), -math.inf
+        if self.direct_drive:
+            self.subscribe(topics.CMD_VEL, Twist, self._on_cmd)
+        self._events = list(self.scenario.events) if self.scenario else []
+        self._standing: Twist | None = None
+        self._next = {"scan": 0.0, "truth": 0.0, "people": 0.0, "resend": 0.0}
+        self._camera_wall = 0.0
+        self.scans = self.frames = 0
+        sim = self.settings.sim
+        self._camera_period_wall = 1.0 / sim.camera_hz if sim.camera_hz > 0 else math.inf
+        self.log.info(
+            "simulated world ready",
+            pose=[round(v, 2) for v in world.pose],
+            people=len(world.crowd.people),
+            low_obstacles=len(world.low_obstacles),
+            direct_drive=self.direct_drive,
+        )
+
+    async def teardown(self) -> None:
+        hooks = getattr(self, "_hooks", [])
+        if self._physics in hooks:
+            hooks.remove(self._physics)
+
+    def stats(self) -> dict[str, Any]:
+        w = self.world
+        return {
+            "scans": self.scans,
+            "frames": self.frames,
+            "collisions": w.collisions,
+            "distance_m": round(w.distance_m, 2),
+            "people": len(w.crowd.people),
+        }
+
+    # ---------------------------------------------------------------- inputs
+    def _on_cmd(self, msg: Twist) -> None:
+        self._cmd, self._cmd_t = msg, self.clock.now()
+
+    def _on_collision(self, c: Collision) -> None:
+        self.bus.publish(
+            topics.SIM_COLLISIONS,
+            Event(
+                self.clock.now(),
+                EVENT_SOURCE,
+                "collision",
+                f"hit {c.name} at {c.speed_mps:.2f} m/s",
+                {
+                    "kind": c.kind,
+                    "name": c.name,
+                    "x": f"{c.x:.3f}",
+                    "y": f"{c.y:.3f}",
+                    "speed_mps": f"{c.speed_mps:.3f}",
+                },
+            ),
+        )
+
+    # ---------------------------------------------------------------- the step
+    def _physics(self, dt: float) -> None:
+        now = self.clock.now()
+        self._play_events(now)
+        if self.direct_drive:
+            self._drive_direct(dt, now)
+        self.world.step(dt)
+        self._publish_due(now + dt)
+
+    def _drive_direct(self, dt: float, now: float) -> None:
+        cmd = self._cmd if now - self._cmd_t <= WATCHDOG_S else Twist()
+        robot = self.settings.robot
+        v = max(-robot.max_linear_mps, min(robot.max_linear_mps, cmd.linear_x))
+        w = max(-robot.max_angular_radps, min(robot.max_angular_radps, cmd.angular_z))
+        self.world.move(dt, v, w)
+
+    def _due(self, key: str, t: float, hz: float) -> bool:
+        if t + 1e-9 < self._next[key]:
+            return False
+        self._next[key] = max(self._next[key] + 1.0 / hz, t)
+        return True
+
+    def _publish_due(self, t: float) -> None:
+        w = self.world
+        if self._due("truth", t, TRUTH_HZ):
+            self.bus.publish(
+                topics.SIM_TRUTH, Odometry(t, Pose2D(*w.pose), Twist(w.v, w.w), "map", "base_link")
+            )
+        if self._due("scan", t, w.lidar.spec.rate_hz):
+            self.bus.publish(topics.SCAN, w.scan(t))
+            self.scans += 1
+        if self._due("people", t, PEOPLE_HZ):
+            self.bus.publish(topics.SIM_PEOPLE, w.people_msg(t))
+            speaker = w.speaker(t)
+            self.bus.publish(topics.SIM_SPEAKER, speaker)
+            if speaker.present:
+                self.bus.publish(topics.SIM_SPEAKER_BEARING, Doa(t, speaker.angle_deg, "sim"))
+        wall = time.monotonic()  # camera frames are paced in wall time (see the module doc)
+        if wall - self._camera_wall >= self._camera_period_wall:
+            self._camera_wall = wall
+            self.bus.publish(topics.CAMERA, w.camera_msg(t))
+            self.frames += 1
+
+    # ---------------------------------------------------------------- scenario
+    def _play_events(self, now: float) -> None:
+        while self._events and self._events[0].at <= now + 1e-9:
+            self._play(self._events.pop(0), now)
+        if self._standing is not None and now + 1e-9 >= self._next["resend"]:
+            self._next["resend"] = now + CMD_RESEND_S
+            self.bus.publish(topics.CMD_VEL, self._standing)
+
+    def _play(self, ev: TimedEvent, now: float) -> None:
+        self.log.info("scenario event", at=ev.at, action=ev.action, value=str(ev.value))
+        if ev.action == "cmd_vel":
+            v, w = ev.value
+            self._standing = Twist(v, w)
+            self._next["resend"] = now
+        elif ev.action == "heard":
+            self.bus.publish(topics.HEARD, Text(ev.value))
+        elif ev.action == "goal":
+            self.spawn(self._send_goal(ev.value), name="sim_world.goal")
+        elif ev.action == "stop":
+            launcher = self.ctx.resources.get("launcher")
+            if launcher is not None:
+                launcher.request_stop()
+        self.bus.publish(
+            topics.EVENTS, Event(now, EVENT_SOURCE, "scenario_event", f"{ev.action}: {ev.value}")
+        )
+
+    async def _send_goal(self, place: str) -> None:
+        from sage_robot.core.msgs.nav import NavigateGoal
+
+        record: dict[str, Any] = {"goal": place, "sent_s": round(self.clock.now(), 2)}
+        self.summary["goals"].append(record)
+        if not self.bus.actions.has(topics.NAVIGATE_TO):
+            record["status"] = "no navigation node"
+            self.log.warning("scenario goal skipped: nothing serves navigate_to", goal=place)
+            return
+        handle = await self.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=place))
+        result = await handle.result()
+        record.update(status=result.status.value, message=result.message, done_s=round(self.clock.now(), 2))

@@ -1,0 +1,305 @@
+"""Simulated pedestrians: walkers along corridors, people who stop and stand, small groups,
+and someone who walks up to the robot and stays a while.
+
+Pure (numpy + stdlib): every random choice comes from the ``numpy.random.Generator``
+given, so a seed gives the same crowd and the same walk. Map frame, metres, radians.
+
+People see the robot: a walker steps aside when the robot is ahead of it and waits
+rather than walk into it, so every contact between the two is the robot's doing.
+People do not avoid each other (the lidar sees them all the same).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+PERSON_RADIUS_M = 0.25  # body circle for collisions and the camera
+LEG_RADIUS_M = 0.07  # each leg, as the lidar sees it at ~0.5 m height
+LEG_HALF_SPACING_M = 0.11  # legs sit this far left/right of the body centre
+STRIDE_M = 0.14  # legs swing this far forward/back while walking
+STRIDE_RATE = 4.0  # leg phase (rad) per metre walked
+WALK_SPEED_MPS = (0.8, 1.3)  # walkers pick a speed in this range
+APPROACH_SPEED_MPS = 0.9
+ROBOT_GAP_M = 0.15  # a person never moves closer than this to the robot's body
+AVOID_LOOKAHEAD_M = 1.5  # a walker steps aside when the robot is this close ahead
+SIDESTEP_MPS = 0.5
+STAND_S = (4.0, 15.0)  # a walker who stops stands this long
+STOP_PROBABILITY = 0.15  # chance a walker stops at each waypoint
+APPROACH_STOP_M = 1.0  # the approacher stops this far from the robot's centre
+APPROACH_DELAY_S = (3.0, 15.0)
+APPROACH_STAY_S = (30.0, 60.0)
+WALL_MARGIN_M = 0.05  # people keep their body this far clear of walls
+ARRIVE_M = 0.15
+SPAWN_MIN_DIST_M = 5.0  # random people start at least this far from the robot
+DEFAULT_MIX = ("walker", "stander", "approacher", "group", "group", "group")
+
+
+@dataclass
+class PersonState:
+    """A person's mutable state (the ``Person`` message is its snapshot)."""
+
+    id: int
+    x: float
+    y: float
+    theta: float = 0.0
+    behaviour: str = "walker"  # walker | stander | group | approacher
+    speed_mps: float = 1.0  # preferred walking speed
+    moving: float = 0.0  # current speed (m/s)
+    route: list[tuple[float, float]] = field(default_factory=list)
+    node: int = -1  # lane node the walker last left
+    prev_node: int = -1
+    wait_until: float = 0.0
+    start_s: float = 0.0  # approacher: when to set off
+    stay_s: float = 0.0  # approacher: how long to stay
+    stay_until: float = -1.0
+    phase: float = 0.0  # leg swing phase (rad)
+    planned: bool = False  # approacher: route to the robot chosen
+    fixed: bool = False  # scenario person with a fixed patrol (no lanes)
+    patrol: list[tuple[float, float]] = field(default_factory=list)
+
+
+class Lanes:
+    """The walking graph: nodes (m) and edges with a lateral half-width (m)."""
+
+    def __init__(self, nodes: list[list[float]], edges: list[list[float]]) -> None:
+        self.nodes = np.asarray(nodes, dtype=np.float64).reshape(-1, 2)
+        self.adj: list[list[tuple[int, float]]] = [[] for _ in range(len(self.nodes))]
+        for a, b, h in edges:
+            self.adj[int(a)].append((int(b), float(h)))
+            self.adj[int(b)].append((int(a), float(h)))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any] | None) -> Lanes | None:
+        if not data or not data.get("nodes"):
+            return None
+        return cls(data["nodes"], data.get("edges", []))
+
+    def path(self, a: int, b: int) -> list[int]:
+        """Shortest node path from ``a`` to ``b`` (Dijkstra on edge lengths); [] if none."""
+        dist, prev, heap = {a: 0.0}, {a: -1}, [(0.0, a)]
+        while heap:
+            d, u = heapq.heappop(heap)
+            if u == b:
+                break
+            if d > dist[u]:
+                continue
+            for v, _ in self.adj[u]:
+                nd = d + float(np.hypot(*(self.nodes[v] - self.nodes[u])))
+                if nd < dist.get(v, math.inf):
+                    dist[v], prev[v] = nd, u
+                    heapq.heappush(heap, (nd, v))
+        if b not in prev:
+            return []
+        out = [b]
+        while prev[out[-1]] != -1:
+            out.append(prev[out[-1]])
+        return out[::-1]
+
+    def nearest(self, x: float, y: float) -> int:
+        return int(np.argmin(np.hypot(self.nodes[:, 0] - x, self.nodes[:, 1] - y)))
+
+    def random_point(self, rng: np.random.Generator, margin_m: float) -> tuple[float, float, int]:
+        """A random point on a random edge, offset sideways up to its half-width - margin."""
+        a = int(rng.integers(len(self.nodes)))
+        if not self.adj[a]:
+            return (float(self.nodes[a, 0]), float(self.nodes[a, 1]), a)
+        b, half = self.adj[a][int(rng.integers(len(self.adj[a])))]
+        f = float(rng.uniform(0.1, 0.9))
+        p = self.nodes[a] + f * (self.nodes[b] - self.nodes[a])
+        off = _lateral(self.nodes[a], self.nodes[b]) * rng.uniform(-1, 1) * max(half - margin_m, 0.0)
+        return (float(p[0] + off[0]), float(p[1] + off[1]), a)
+
+
+def _lateral(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    d = b - a
+    n = float(np.hypot(d[0], d[1])) or 1.0
+    return np.array([-d[1] / n, d[0] / n])
+
+
+Clearance = Any  # callable (x, y) -> metres to the nearest wall (vectorized)
+
+
+class Crowd:
+    """Every simulated person, stepped together."""
+
+    def __init__(
+        self,
+        people: list[PersonState],
+        lanes: Lanes | None,
+        clearance: Clearance,
+        rng: np.random.Generator,
+        line_of_sight: Any = None,
+    ) -> None:
+        self.people, self.lanes, self.clearance, self.rng = people, lanes, clearance, rng
+        self.line_of_sight = line_of_sight  # (x0, y0, x1, y1) -> bool, for the approacher
+
+    # ---------------------------------------------------------------- geometry
+    def bodies(self) -> np.ndarray:
+        """(n, 3): x, y, radius of every body (m)."""
+        return np.array([[p.x, p.y, PERSON_RADIUS_M] for p in self.people], dtype=np.float64).reshape(-1, 3)
+
+    def legs(self) -> np.ndarray:
+        """(2n, 3): x, y, radius of every leg (m): what a lidar at knee-to-hip height sees."""
+        out = np.empty((2 * len(self.people), 3))
+        for i, p in enumerate(self.people):
+            c, s = math.cos(p.theta), math.sin(p.theta)
+            swing = STRIDE_M * math.sin(p.phase)
+            for j, side in enumerate((1.0, -1.0)):
+                fwd = swing * side
+                out[2 * i + j] = (
+                    p.x + c * fwd - s * side * LEG_HALF_SPACING_M,
+                    p.y + s * fwd + c * side * LEG_HALF_SPACING_M,
+                    LEG_RADIUS_M,
+                )
+        return out
+
+    # ---------------------------------------------------------------- stepping
+    def step(self, dt: float, t: float, robot: tuple[float, float, float], robot_radius: float) -> None:
+        for p in self.people:
+            goal = self._goal(p, t, robot)
+            if goal is None:
+                p.moving = 0.0
+                if p.behaviour == "approacher" and p.stay_until > t:
+                    p.theta = math.atan2(robot[1] - p.y, robot[0] - p.x)
+                continue
+            self._move_toward(p, goal, dt, robot, robot_radius)
+
+    def _goal(
+        self, p: PersonState, t: float, robot: tuple[float, float, float]
+    ) -> tuple[float, float] | None:
+        if p.behaviour in ("stander", "group"):
+            return None
+        if p.wait_until > t:
+            return None
+        if p.behaviour == "approacher":
+            return self._approach_goal(p, t, robot)
+        while p.route and math.hypot(p.route[0][0] - p.x, p.route[0][1] - p.y) < ARRIVE_M:
+            p.route.pop(0)
+            if self.rng.random() < STOP_PROBABILITY:
+                p.wait_until = t + float(self.rng.uniform(*STAND_S))
+                return None
+        if not p.route:
+            self._plan(p)
+        return p.route[0] if p.route else None
+
+    def _approach_goal(
+        self, p: PersonState, t: float, robot: tuple[float, float, float]
+    ) -> tuple[float, float] | None:
+        if t < p.start_s:
+            return None
+        if p.stay_until >= 0.0:
+            if t < p.stay_until:
+                return None
+            p.behaviour = "walker"  # said what they wanted: walk on
+            p.route.clear()
+            return None
+        gx = robot[0] + APPROACH_STOP_M * math.cos(robot[2])
+        gy = robot[1] + APPROACH_STOP_M * math.sin(robot[2])
+        if math.hypot(gx - p.x, gy - p.y) < ARRIVE_M or math.hypot(robot[0] - p.x, robot[1] - p.y) <= (
+            APPROACH_STOP_M + ARRIVE_M
+        ):
+            p.stay_until = t + p.stay_s
+            return None
+        p.speed_mps = APPROACH_SPEED_MPS
+        if not p.planned:
+            p.planned = True
+            if (
+                self.lanes is not None
+                and self.line_of_sight is not None
+                and not self.line_of_sight(p.x, p.y, gx, gy)
+            ):
+                nodes = self.lanes.path(self.lanes.nearest(p.x, p.y), self.lanes.nearest(gx, gy))
+                p.route = [(float(self.lanes.nodes[n, 0]), float(self.lanes.nodes[n, 1])) for n in nodes]
+        while p.route and math.hypot(p.route[0][0] - p.x, p.route[0][1] - p.y) < ARRIVE_M:
+            p.route.pop(0)
+        return p.route[0] if p.route else (gx, gy)
+
+    def _plan(self, p: PersonState) -> None:
+        """Next waypoint: along the lanes (random walk, no immediate U-turn), the patrol, or
+        a random spot with clearance when the map has no lanes."""
+        if p.patrol:
+            p.route.append(p.patrol[0])
+            p.patrol.append(p.patrol.pop(0))
+            return
+        if self.lanes is None:
+            p.route.append(self._random_free(p))
+            return
+        lanes = self.lanes
+        if p.node < 0:
+            p.node = lanes.nearest(p.x, p.y)
+            p.route.append((float(lanes.nodes[p.node, 0]), float(lanes.nodes[p.node, 1])))
+            return
+        options = [(b, h) for b, h in lanes.adj[p.node] if b != p.prev_node] or lanes.adj[p.node]
+        if not options:
+            return
+        b, half = options[int(self.rng.integers(len(options)))]
+        off = (
+            _lateral(lanes.nodes[p.node], lanes.nodes[b])
+            * self.rng.uniform(-1, 1)
+            * max(half - PERSON_RADIUS_M - 0.1, 0.0)
+        )
+        target = lanes.nodes[b] + off
+        p.route.append((float(target[0]), float(target[1])))
+        p.prev_node, p.node = p.node, b
+
+    def _random_free(self, p: PersonState) -> tuple[float, float]:
+        for _ in range(50):
+            x = p.x + float(self.rng.uniform(-8, 8))
+            y = p.y + float(self.rng.uniform(-8, 8))
+            if float(self.clearance(x, y)[0]) > PERSON_RADIUS_M + 0.3:
+                return (x, y)
+        return (p.x, p.y)
+
+    def _free(self, x: float, y: float) -> bool:
+        return float(self.clearance(x, y)[0]) >= PERSON_RADIUS_M + WALL_MARGIN_M
+
+    def _move_toward(
+        self,
+        p: PersonState,
+        goal: tuple[float, float],
+        dt: float,
+        robot: tuple[float, float, float],
+        rr: float,
+    ) -> None:
+        dx, dy = goal[0] - p.x, goal[1] - p.y
+        dist = math.hypot(dx, dy)
+        if dist < 1e-6:
+            return
+        ux, uy = dx / dist, dy / dist
+        step = min(p.speed_mps * dt, dist)
+        vx, vy = ux * step, uy * step
+        rx, ry = robot[0] - p.x, robot[1] - p.y
+        ahead = rx * ux + ry * uy
+        if p.behaviour == "walker" and 0.0 < ahead < AVOID_LOOKAHEAD_M + rr:
+            side = -1.0 if (ux * ry - uy * rx) > 0 else 1.0  # away from the robot
+            vx += -uy * side * SIDESTEP_MPS * dt
+            vy += ux * side * SIDESTEP_MPS * dt
+        nx, ny = p.x + vx, p.y + vy
+        keep = PERSON_RADIUS_M + rr + ROBOT_GAP_M
+        if math.hypot(robot[0] - nx, robot[1] - ny) < keep and math.hypot(rx, ry) >= math.hypot(
+            robot[0] - nx, robot[1] - ny
+        ):
+            p.moving = 0.0  # would walk into the robot: wait
+            return
+        if not self._free(nx, ny):
+            # Blocked by a wall: slide along it (the larger axis of the move first); if that
+            # fails too, give up this waypoint.
+            slides = [(p.x + vx, p.y), (p.x, p.y + vy)]
+            if abs(vy) > abs(vx):
+                slides.reverse()
+            free = [s for s in slides if self._free(*s)]
+            if not free:
+                p.moving = 0.0
+                if p.route:
+                    p.route.pop(0)
+                return
+            nx, ny = free[0]
+        moved = math.hypot(nx - p.x, ny - p.y)
+        p.x, p.y, p.theta = nx, ny, math.atan2(uy, ux)
+        p.moving = moved / dt if dt > 0 else 0.0
+        p.phase = (p.phase + STRIDE_RATE * moved) % (2 * math.pi)

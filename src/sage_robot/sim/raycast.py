@@ -1,0 +1,202 @@
+"""Vectorized ray casting against an occupancy grid, circles and oriented boxes.
+
+Grid rays use sphere tracing on a distance transform while far from walls and exact
+cell-by-cell (Amanatides–Woo) steps once near one, all beams at once in numpy, so a
+360-beam scan costs a few dozen array operations instead of 360 Python loops.
+
+Conventions: map frame in metres, angles in radians counter-clockwise from +x.
+Ranges are measured from the ray origin to the first occupied cell's boundary;
+``inf`` means nothing was hit within ``max_range``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from sage_robot.core.msgs import OccupancyGrid
+
+OCCUPIED_MIN = 50  # cells with a value >= this block rays (0..100 scale)
+SQRT2 = math.sqrt(2.0)
+CROSS_EPS_CELLS = 1e-4  # how far past a cell boundary a DDA step lands (cells)
+MIN_SPHERE_STEP_CELLS = 1.0  # below this safe distance, step cell by cell
+TRACE_ITERS = 24  # traced steps before the grazing beams left are finished by sampling
+SAMPLE_STEP_CELLS = 0.5  # sampling step for those (may miss a corner clipped by < 1/2 cell)
+FREE_CODE, OCC_CODE, OUT_CODE = 0, 1, 2
+HUGE = 1e30
+
+
+class GridRaycaster:
+    """Casts rays through one grid. Build once per map (it precomputes a distance transform)."""
+
+    def __init__(self, grid: OccupancyGrid) -> None:
+        self.grid = grid
+        self.res = float(grid.resolution)
+        self.height, self.width = grid.data.shape
+        self.occupied = np.ascontiguousarray(grid.data >= OCCUPIED_MIN)
+        o = grid.origin
+        self._ox, self._oy, self._oyaw = o.x, o.y, o.theta
+        self._c, self._s = math.cos(o.theta), math.sin(o.theta)
+        if self.occupied.any():
+            edt = ndimage.distance_transform_edt(~self.occupied)
+        else:
+            edt = np.full(self.occupied.shape, float(self.height + self.width))
+        # Cells: distance from a cell centre to the nearest occupied cell centre.
+        self.edt_cells = edt.astype(np.float32)
+        # Distance any point of a cell is guaranteed to travel without touching an occupied
+        # square: centre distance minus both half-diagonals.
+        self._safe = np.maximum(self.edt_cells - SQRT2, 0.0).astype(np.float32)
+        # Padded copies with a one-cell border of "outside", indexed flat: one gather per step.
+        self._pad_w = self.width + 2
+        codes = np.full((self.height + 2, self.width + 2), OUT_CODE, dtype=np.uint8)
+        codes[1:-1, 1:-1] = np.where(self.occupied, OCC_CODE, FREE_CODE)
+        self._codes = codes.ravel()
+        safe = np.zeros((self.height + 2, self.width + 2), dtype=np.float64)
+        safe[1:-1, 1:-1] = self._safe
+        self._safe_flat = safe.ravel()
+
+    # ---------------------------------------------------------------- helpers
+    def to_grid(self, x: float, y: float) -> tuple[float, float]:
+        """Map-frame point (m) → continuous grid coordinates (cells, col then row)."""
+        dx, dy = x - self._ox, y - self._oy
+        return ((self._c * dx + self._s * dy) / self.res, (-self._s * dx + self._c * dy) / self.res)
+
+    def clearance(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
+        """Distance (m) from map points to the nearest occupied cell's boundary (approx., ±res/2).
+
+        Points outside the grid get +inf (nothing to collide with there)."""
+        xs, ys = (
+            np.atleast_1d(np.asarray(x, dtype=np.float64)),
+            np.atleast_1d(np.asarray(y, dtype=np.float64)),
+        )
+        dx, dy = xs - self._ox, ys - self._oy
+        col = np.floor((self._c * dx + self._s * dy) / self.res).astype(np.int64)
+        row = np.floor((-self._s * dx + self._c * dy) / self.res).astype(np.int64)
+        inb = (row >= 0) & (row < self.height) & (col >= 0) & (col < self.width)
+        out = np.full(xs.shape, np.inf)
+        d = self.edt_cells[row[inb], col[inb]].astype(np.float64)
+        out[inb] = np.maximum(d - 0.5, 0.0) * self.res
+        return out
+
+    # ---------------------------------------------------------------- casting
+    def cast(self, x: float, y: float, angles: np.ndarray, max_range: float) -> np.ndarray:
+        """Ranges (m, float64) from (x, y) along map-frame ``angles`` (rad); inf = no hit."""
+        angles = np.asarray(angles, dtype=np.float64)
+        n = angles.shape[0]
+        out = np.full(n, np.inf)
+        gx0, gy0 = self.to_grid(x, y)
+        a = angles - self._oyaw
+        dx_all, dy_all = np.cos(a), np.sin(a)
+        tmax = max_range / self.res
+        idx = np.arange(n)
+        t = np.zeros(n)
+        dx, dy = dx_all, dy_all
+        # Next-boundary terms of the cell walk; a zero direction component never crosses.
+        with np.errstate(divide="ignore"):
+            inv_dx = np.where(dx != 0.0, 1.0 / dx, HUGE)
+            inv_dy = np.where(dy != 0.0, 1.0 / dy, HUGE)
+        sx, sy = (dx >= 0).astype(np.float64), (dy >= 0).astype(np.float64)
+        codes, safe_flat, pw, w, h = self._codes, self._safe_flat, self._pad_w, self.width, self.height
+        for _ in range(TRACE_ITERS):
+            px, py = gx0 + t * dx, gy0 + t * dy
+            ix, iy = np.floor(px), np.floor(py)
+            flat = ((np.clip(iy, -1, h) + 1) * pw + (np.clip(ix, -1, w) + 1)).astype(np.intp)
+            code = codes[flat]
+            done = (code != FREE_CODE) | (t > tmax)
+            if done.any():
+                hit = code == OCC_CODE
+                out[idx[hit]] = t[hit] * self.res
+                keep = ~done
+                idx, t, dx, dy = idx[keep], t[keep], dx[keep], dy[keep]
+                inv_dx, inv_dy, sx, sy = inv_dx[keep], inv_dy[keep], sx[keep], sy[keep]
+                px, py, ix, iy, flat = px[keep], py[keep], ix[keep], iy[keep], flat[keep]
+                if idx.size == 0:
+                    break
+            safe = safe_flat[flat]
+            cross = np.minimum((ix + sx - px) * inv_dx, (iy + sy - py) * inv_dy)
+            t = t + np.where(safe >= MIN_SPHERE_STEP_CELLS, safe, cross + CROSS_EPS_CELLS)
+        if idx.size:
+            # Beams still going after TRACE_ITERS graze a wall: finish them by dense sampling.
+            out[idx] = self._sample(gx0, gy0, dx_all[idx], dy_all[idx], t, tmax) * self.res
+        out[out > max_range] = np.inf
+        return out
+
+    def _sample(
+        self, gx0: float, gy0: float, dx: np.ndarray, dy: np.ndarray, t0: np.ndarray, tmax: float
+    ) -> np.ndarray:
+        """Distances (cells) for a few beams: sample every SAMPLE_STEP_CELLS from ``t0``, take the
+        first occupied sample, then the exact entry into that cell. inf = no hit."""
+        steps = np.arange(0.0, max(tmax - float(t0.min()), 0.0) + SAMPLE_STEP_CELLS, SAMPLE_STEP_CELLS)
+        ts = t0[:, None] + steps[None, :]  # (beams, samples)
+        ix = np.floor(gx0 + ts * dx[:, None])
+        iy = np.floor(gy0 + ts * dy[:, None])
+        flat = ((np.clip(iy, -1, self.height) + 1) * self._pad_w + (np.clip(ix, -1, self.width) + 1)).astype(
+            np.intp
+        )
+        code = self._codes[flat]
+        code[ts > tmax] = OUT_CODE
+        stop = code != FREE_CODE
+        first = np.argmax(stop, axis=1)
+        rows = np.arange(len(dx))
+        hit = code[rows, first] == OCC_CODE
+        cx, cy = ix[rows, first], iy[rows, first]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tx = np.where(dx != 0, (cx + (dx < 0) - gx0) / dx, -np.inf)
+            ty = np.where(dy != 0, (cy + (dy < 0) - gy0) / dy, -np.inf)
+        lo = ts[rows, np.maximum(first - 1, 0)]
+        entry = np.clip(np.maximum(tx, ty), lo, ts[rows, first])
+        return np.where(hit, entry, np.inf)
+
+
+def ray_circles(x: float, y: float, angles: np.ndarray, circles: np.ndarray) -> np.ndarray:
+    """Distance (m) along each ray from (x, y) to the nearest circle; inf = none.
+
+    ``circles`` is (k, 3): centre x, centre y, radius (m). A ray starting inside a
+    circle hits it at 0."""
+    angles = np.asarray(angles, dtype=np.float64)
+    if circles.size == 0:
+        return np.full(angles.shape, np.inf)
+    dx, dy = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    fx, fy = circles[None, :, 0] - x, circles[None, :, 1] - y
+    b = fx * dx + fy * dy
+    c = fx * fx + fy * fy - circles[None, :, 2] ** 2
+    disc = b * b - c
+    with np.errstate(invalid="ignore"):
+        t = b - np.sqrt(disc)
+    t = np.where(c <= 0.0, 0.0, t)  # inside
+    valid = (disc >= 0.0) & ((t >= 0.0) | (c <= 0.0))
+    return np.where(valid, t, np.inf).min(axis=1)
+
+
+def ray_boxes(x: float, y: float, angles: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance (m) along each ray to the nearest oriented box, and that box's index (-1 = none).
+
+    ``boxes`` is (k, 5): centre x, centre y, length (along yaw), depth, yaw (m, rad).
+    Slab test in each box's frame."""
+    angles = np.asarray(angles, dtype=np.float64)
+    n = angles.shape[0]
+    if boxes.size == 0:
+        return np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
+    c, s = np.cos(boxes[:, 4])[None, :], np.sin(boxes[:, 4])[None, :]
+    ox, oy = x - boxes[None, :, 0], y - boxes[None, :, 1]
+    lx, ly = c * ox + s * oy, -s * ox + c * oy  # ray origin in box frames
+    da, db = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    ddx, ddy = c * da + s * db, -s * da + c * db
+    hx, hy = boxes[None, :, 2] / 2.0, boxes[None, :, 3] / 2.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1x, t2x = (-hx - lx) / ddx, (hx - lx) / ddx
+        t1y, t2y = (-hy - ly) / ddy, (hy - ly) / ddy
+    # A ray parallel to a slab: inside it always, outside it never.
+    inside_x, inside_y = np.abs(lx) <= hx, np.abs(ly) <= hy
+    tminx = np.where(ddx == 0, np.where(inside_x, -np.inf, np.inf), np.minimum(t1x, t2x))
+    tmaxx = np.where(ddx == 0, np.where(inside_x, np.inf, -np.inf), np.maximum(t1x, t2x))
+    tminy = np.where(ddy == 0, np.where(inside_y, -np.inf, np.inf), np.minimum(t1y, t2y))
+    tmaxy = np.where(ddy == 0, np.where(inside_y, np.inf, -np.inf), np.maximum(t1y, t2y))
+    tnear, tfar = np.maximum(tminx, tminy), np.minimum(tmaxx, tmaxy)
+    hit = (tnear <= tfar) & (tfar >= 0.0)
+    t = np.where(hit, np.maximum(tnear, 0.0), np.inf)
+    which = np.argmin(t, axis=1)
+    best = t[np.arange(n), which]
+    return best, np.where(np.isfinite(best), which, -1)

@@ -1,0 +1,162 @@
+"""Where simulated people start: a seeded default crowd, or the people a scenario lists."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core.errors import ConfigError
+from sage_robot.sim.people import (
+    APPROACH_DELAY_S,
+    APPROACH_STAY_S,
+    APPROACH_STOP_M,
+    PERSON_RADIUS_M,
+    SPAWN_MIN_DIST_M,
+    WALK_SPEED_MPS,
+    Lanes,
+    PersonState,
+)
+
+MIX = ("walker", "stander", "approacher", "group")  # then walkers
+GROUP_SIZE = 3
+GROUP_RING_M = 0.55  # members stand on a circle this wide around the group's centre
+GROUP_FROM_PLACE_M = (1.5, 2.5)
+APPROACHER_FROM_ROBOT_M = (3.0, 10.0)
+SPAWN_TRIES = 200
+BEHAVIOURS = ("walker", "stander", "group", "approacher")
+PERSON_KEYS = {"kind", "at", "to", "heading", "speed", "start_s", "stay_s"}
+
+Clearance = Callable[[float, float], np.ndarray]
+SampleFree = Callable[[np.random.Generator], tuple[float, float]]
+LineOfSight = Callable[[float, float, float, float], bool]
+
+
+def spawn_crowd(
+    n: int,
+    rng: np.random.Generator,
+    robot_xy: tuple[float, float],
+    lanes: Lanes | None,
+    place_xys: list[tuple[float, float]],
+    clearance: Clearance,
+    sample_free: SampleFree,
+    line_of_sight: LineOfSight,
+    robot_yaw: float = 0.0,
+) -> list[PersonState]:
+    """``n`` people, in the mix walker, stander, approacher, a group of three, then walkers."""
+    people: list[PersonState] = []
+
+    def clear(x: float, y: float, need: float) -> bool:
+        return float(clearance(x, y)[0]) >= need
+
+    def far(x: float, y: float, lo: float = SPAWN_MIN_DIST_M, hi: float = math.inf) -> bool:
+        d = math.hypot(x - robot_xy[0], y - robot_xy[1])
+        return lo <= d <= hi
+
+    def spot(ok: Callable[[float, float], bool]) -> tuple[float, float]:
+        for _ in range(SPAWN_TRIES):
+            if lanes is not None:
+                x, y, _ = lanes.random_point(rng, PERSON_RADIUS_M + 0.1)
+            else:
+                x, y = sample_free(rng)
+            if clear(x, y, PERSON_RADIUS_M + 0.1) and ok(x, y):
+                return (x, y)
+        raise ConfigError("could not find room for the simulated people; lower sim.pedestrians")
+
+    fx = robot_xy[0] + APPROACH_STOP_M * math.cos(robot_yaw)
+    fy = robot_xy[1] + APPROACH_STOP_M * math.sin(robot_yaw)
+    k = 0
+    while len(people) < n:
+        kind = MIX[k] if k < len(MIX) else "walker"
+        k += 1
+        pid = len(people)
+        heading = float(rng.uniform(-math.pi, math.pi))
+        if kind == "group" and place_xys:
+            size = min(GROUP_SIZE, n - len(people))
+            people += _group(pid, size, rng, place_xys, clear, far)
+            continue
+        if kind == "approacher":
+            # Somewhere in sight of the spot in front of the robot where they will stand.
+            try:
+                x, y = spot(lambda x, y: far(x, y, *APPROACHER_FROM_ROBOT_M) and line_of_sight(x, y, fx, fy))
+            except ConfigError:
+                x, y = spot(far)
+            people.append(
+                PersonState(
+                    pid,
+                    x,
+                    y,
+                    heading,
+                    "approacher",
+                    speed_mps=1.0,
+                    start_s=float(rng.uniform(*APPROACH_DELAY_S)),
+                    stay_s=float(rng.uniform(*APPROACH_STAY_S)),
+                )
+            )
+            continue
+        x, y = spot(far)
+        behaviour = "stander" if kind == "stander" else "walker"
+        people.append(
+            PersonState(pid, x, y, heading, behaviour, speed_mps=float(rng.uniform(*WALK_SPEED_MPS)))
+        )
+    return people
+
+
+def _group(
+    pid: int,
+    size: int,
+    rng: np.random.Generator,
+    place_xys: list[tuple[float, float]],
+    clear: Callable[[float, float, float], bool],
+    far: Callable[[float, float], bool],
+) -> list[PersonState]:
+    for _ in range(SPAWN_TRIES):
+        px, py = place_xys[int(rng.integers(len(place_xys)))]
+        a, r = float(rng.uniform(-math.pi, math.pi)), float(rng.uniform(*GROUP_FROM_PLACE_M))
+        cx, cy = px + r * math.cos(a), py + r * math.sin(a)
+        if clear(cx, cy, GROUP_RING_M + PERSON_RADIUS_M + 0.1) and far(cx, cy):
+            break
+    else:
+        raise ConfigError("could not find room for a group of simulated people")
+    out = []
+    for j in range(size):
+        b = a + 2 * math.pi * j / size
+        x, y = cx + GROUP_RING_M * math.cos(b), cy + GROUP_RING_M * math.sin(b)
+        out.append(PersonState(pid + j, x, y, math.atan2(cy - y, cx - x), "group", speed_mps=0.0))
+    return out
+
+
+def people_from_specs(
+    specs: list[dict[str, Any]], first_id: int, resolve: Callable[[Any, str], tuple[float, float, float]]
+) -> list[PersonState]:
+    """Scenario people: ``{kind, at, to, heading, speed, start_s, stay_s}``; ``at``/``to`` are
+    [x, y] or a place name (``resolve`` turns them into poses)."""
+    out = []
+    for i, spec in enumerate(specs):
+        where = f"people[{i}]"
+        if not isinstance(spec, dict):
+            raise ConfigError(f"{where}: expected a mapping, got {spec!r}")
+        unknown = set(spec) - PERSON_KEYS
+        if unknown:
+            raise ConfigError(
+                f"{where}: unknown key(s) {', '.join(sorted(unknown))}; allowed: "
+                f"{', '.join(sorted(PERSON_KEYS))}"
+            )
+        kind = spec.get("kind", "stander")
+        if kind not in BEHAVIOURS:
+            raise ConfigError(f"{where}: kind must be one of {', '.join(BEHAVIOURS)}, got {kind!r}")
+        if "at" not in spec:
+            raise ConfigError(f"{where}: needs 'at' ([x, y] or a place name)")
+        x, y, yaw = resolve(spec["at"], f"{where}.at")
+        heading = float(spec.get("heading", yaw))
+        p = PersonState(first_id + i, x, y, heading, kind, speed_mps=float(spec.get("speed", 1.0)))
+        if "to" in spec:
+            tx, ty, _ = resolve(spec["to"], f"{where}.to")
+            p.patrol = [(tx, ty), (x, y)]
+            p.fixed = True
+        p.start_s = float(spec.get("start_s", 0.0))
+        p.stay_s = float(spec.get("stay_s", 60.0))
+        out.append(p)
+    return out
