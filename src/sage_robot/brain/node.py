@@ -17,7 +17,7 @@ import asyncio
 from typing import Any
 
 from sage_robot.brain.base import Brain, TurnResult
-from sage_robot.brain.phrases import EVENT_LINES, place_phrase, welcome
+from sage_robot.brain.phrases import EVENT_LINES, place_phrase, upper_first, welcome
 from sage_robot.brain.robot import RobotLink
 from sage_robot.brain.tools import ToolContext, ToolRegistry
 from sage_robot.core import topics
@@ -77,14 +77,14 @@ class BrainNode(Node):
             self._idle_check()
             result = await self.brain.respond(goal.data, lambda s: ctx.feedback(Text(s)))
             self.turns += 1
-            self.log.info("turn", heard=goal.data, reply=result.reply, brain=result.brain)
+            self.log.debug("turn", heard=goal.data, reply=result.reply, brain=result.brain)
             return Text(result.reply)
 
     def _say(self, sentence: str) -> None:
         self.bus.publish(topics.SAY, Text(sentence))
 
     def _nav_failed(self, place: str, reason: str) -> None:
-        self._say(f"Sorry, I could not get to {place_phrase(place)}. {reason.rstrip('.')}.")
+        self._say(f"Sorry, I could not get to {place_phrase(place)}. {upper_first(reason.rstrip('.'))}.")
 
     async def _on_event(self, event: Event) -> None:
         self.robot.on_event(event)

@@ -1,0 +1,115 @@
+"""Brain: offline intent accuracy (dev and held-out phrasings) and LLM first-sentence latency.
+
+Accuracy: the offline classifier on ``data/brain/phrasings_dev.yaml`` (used while
+developing) and ``phrasings_heldout.yaml`` (never looked at while tuning), against the
+seed's places in ``data/brain/places.yaml``. An utterance counts as right when both the
+intent and the place (for navigation and place questions) are right.
+
+Latency: the real ``openai`` client against the scripted OpenAI-compatible server on
+loopback; each turn streams a reply in small pieces with ``--token-delay-ms`` between
+them (a model's token rate), and the time from sending the turn to the first sentence
+handed to speech is measured, for a plain reply and for a turn with one tool round.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import time
+from collections import Counter
+from typing import Any
+
+REPLY = "Sure thing, the Guelly Delly is right around the corner. Follow me and I will show you the way."
+PIECE_CHARS = 4  # characters per streamed piece (about one token)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--turns", type=int, default=30, help="latency turns per case")
+    p.add_argument("--token-delay-ms", type=float, default=5.0, help="pause between streamed pieces (ms)")
+
+
+def accuracy(which: str) -> dict[str, Any]:
+    import yaml
+
+    from sage_robot.brain.intents import classify
+    from sage_robot.core.paths import package_data
+    from sage_robot.core.places import load_places
+
+    places = load_places(package_data("brain", "places.yaml"))
+    rows = yaml.safe_load(package_data("brain", f"phrasings_{which}.yaml").read_text())["phrasings"]
+    right, per_intent, per_intent_right = 0, Counter(), Counter()
+    t0 = time.perf_counter()
+    for r in rows:
+        text, intent, place = str(r[0]), r[1], (r[2] if len(r) > 2 else "")
+        got = classify(text, places)
+        ok = got.name == intent and got.place_name == place
+        right += ok
+        per_intent[intent] += 1
+        per_intent_right[intent] += ok
+    ms = (time.perf_counter() - t0) * 1000 / max(1, len(rows))
+    weakest = sorted(per_intent, key=lambda k: per_intent_right[k] / per_intent[k])[:3]
+    return {
+        "phrasings": len(rows),
+        "accuracy": round(right / len(rows), 3),
+        "classify_ms": round(ms, 2),
+        "weakest_intents": {k: f"{per_intent_right[k]}/{per_intent[k]}" for k in weakest},
+    }
+
+
+async def _latency(turns: int, delay_s: float) -> dict[str, Any]:
+    import datetime as dt
+
+    import numpy as np
+
+    from sage_robot.brain.llm import LlmBrain
+    from sage_robot.brain.robot import RobotLink
+    from sage_robot.brain.scripted import ScriptedServer, Stream, call, text_chunks
+    from sage_robot.brain.tools import ToolContext, ToolRegistry
+    from sage_robot.core.bus import Bus
+    from sage_robot.core.config import Settings
+    from sage_robot.core.paths import package_data
+
+    out: dict[str, Any] = {}
+    async with ScriptedServer() as server:
+        settings = Settings.model_validate({"llm": {"base_url": server.base_url, "max_retries": 0}})
+        bus = Bus()
+        robot = RobotLink(bus, package_data("brain", "places.yaml"))
+        brain = LlmBrain(
+            settings, ToolRegistry(ToolContext(robot, settings)), bus.clock, today=lambda: dt.date(2026, 1, 1)
+        )
+        reply = Stream(text_chunks(REPLY, PIECE_CHARS), delay_s=delay_s)
+        for case, script in (
+            ("plain", [reply]),
+            ("one_tool_round", [call(("describe_place", {"name": "the cafe"})), reply]),
+        ):
+            firsts, totals = [], []
+            for i in range(turns + 1):  # the first turn warms the client up and is not counted
+                server.add(*script)
+                brain.reset()
+                t0 = time.perf_counter()
+                first: list[float] = []
+                await brain.respond("take me to the cafe", lambda s, f=first: f.append(time.perf_counter()))
+                if i:
+                    firsts.append(first[0] - t0)
+                    totals.append(time.perf_counter() - t0)
+            f, t = np.array(firsts) * 1000, np.array(totals) * 1000
+            out[case] = {
+                "first_sentence_ms_p50": round(float(np.percentile(f, 50)), 1),
+                "first_sentence_ms_p95": round(float(np.percentile(f, 95)), 1),
+                "whole_reply_ms_p50": round(float(np.percentile(t, 50)), 1),
+            }
+        await robot.close()
+    return out
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    return {
+        "bench": "brain",
+        "offline_dev": accuracy("dev"),
+        "offline_heldout": accuracy("heldout"),
+        "llm_latency": {
+            "turns": args.turns,
+            "token_delay_ms": args.token_delay_ms,
+            **asyncio.run(_latency(args.turns, args.token_delay_ms / 1000)),
+        },
+    }
