@@ -37,7 +37,9 @@ def accuracy(which: str) -> dict[str, Any]:
 
     places = load_places(package_data("brain", "places.yaml"))
     rows = yaml.safe_load(package_data("brain", f"phrasings_{which}.yaml").read_text())["phrasings"]
-    right, per_intent, per_intent_right = 0, Counter(), Counter()
+    right = 0
+    per_intent: Counter[str] = Counter()
+    per_intent_right: Counter[str] = Counter()
     t0 = time.perf_counter()
     for r in rows:
         text, intent, place = str(r[0]), r[1], (r[2] if len(r) > 2 else "")
@@ -88,7 +90,11 @@ async def _latency(turns: int, delay_s: float) -> dict[str, Any]:
                 brain.reset()
                 t0 = time.perf_counter()
                 first: list[float] = []
-                await brain.respond("take me to the cafe", lambda s, f=first: f.append(time.perf_counter()))
+
+                def heard(sentence: str, first: list[float] = first) -> None:
+                    first.append(time.perf_counter())
+
+                await brain.respond("take me to the cafe", heard)
                 if i:
                     firsts.append(first[0] - t0)
                     totals.append(time.perf_counter() - t0)
