@@ -62,6 +62,14 @@ class LlmSettings(Section):
     max_history_turns: int = Field(12, gt=0, description="Conversation turns kept.")
     max_tool_rounds: int = Field(4, gt=0, description="Tool rounds per visitor turn.")
     idle_reset_s: float = Field(120.0, gt=0, description="Forget the conversation after (s).")
+    max_retries: int = Field(2, ge=0, description="Retries on 429/5xx/connection errors (backoff).")
+    temperature: float = Field(0.6, ge=0, le=2, description="Sampling temperature.")
+    max_tokens: int = Field(400, gt=0, description="Longest reply per model call (tokens).")
+    offline_retry_s: float = Field(
+        60.0, ge=0, description="After the endpoint fails, answer offline for this long (s)."
+    )
+    web_search_url: str = Field("https://api.tavily.com/search", description="Tavily search URL.")
+    web_search_key_env: str = Field("TAVILY_API_KEY", description="Variable with the Tavily key.")
 
 
 class KbSettings(Section):
