@@ -13,6 +13,7 @@ import asyncio
 import concurrent.futures
 import contextlib
 import os
+import shutil
 import threading
 from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
@@ -28,8 +29,10 @@ from sage_robot.app.runtime import make_context, run_launcher
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalContext
 from sage_robot.core.config import load_profile
+from sage_robot.core.mapio import read_map
 from sage_robot.core.msgs import OccupancyGrid, Odometry, Pose2D, Text
 from sage_robot.core.msgs.nav import NavigateGoal, NavigateResult
+from sage_robot.core.paths import DEFAULT_BUILDING, map_yaml, package_data
 from sage_robot.core.places import Place, Places, write_places
 
 PASSWORD = "test-operator-pw"
@@ -79,6 +82,8 @@ class SimRobot:
         self.goals: list[NavigateGoal] = []
         self.questions: list[str] = []
         self.stand_ins: list[str] = []
+        self.password = PASSWORD
+        self.artifacts = artifacts_dir()
         self.thread = threading.Thread(target=self._thread, name="sim-robot", daemon=True)
 
     # ------------------------------------------------------------ lifecycle
@@ -105,9 +110,11 @@ class SimRobot:
 
     async def _main(self) -> None:
         waypoints = self.tmp / "waypoints.yaml"
-        write_places(
-            Places([Place("LOBBY", Pose2D(3.0, 1.0, 0.0), "the front hall", ("the lobby",))]), waypoints
-        )
+        shipped = package_data("maps", DEFAULT_BUILDING, "waypoints.yaml")
+        if shipped.exists():  # a copy: the admin test adds a place to it
+            shutil.copy(shipped, waypoints)
+        else:
+            write_places(Places([Place("LOBBY", Pose2D(3.0, 1.0, 0.0), "the front hall")]), waypoints)
         settings = load_profile(
             None,
             {
@@ -129,7 +136,9 @@ class SimRobot:
             if "map_server" not in self.node_names:
                 self.stand_ins.append("map")
                 self.bus.declare(topics.MAP, OccupancyGrid, latched=True)
-                self.bus.publish(topics.MAP, hand_drawn_map())
+                shipped_map = map_yaml(settings)
+                grid = read_map(shipped_map) if shipped_map.exists() else hand_drawn_map()
+                self.bus.publish(topics.MAP, grid)
             if "navigator" not in self.node_names:
                 self.stand_ins.append("navigate_to")
                 self.bus.actions.serve(topics.NAVIGATE_TO, self._navigate)
@@ -143,7 +152,13 @@ class SimRobot:
             self.url = self.ctx.resources["web_url"]
             self.ready.set()
 
-        await run_launcher(self.ctx, specs, after_start=after_start)
+        try:
+            await run_launcher(self.ctx, specs, after_start=after_start)
+        finally:
+            rest = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for t in rest:
+                t.cancel()
+            await asyncio.gather(*rest, return_exceptions=True)
 
     # ------------------------------------------------------------ stand-ins
     async def _navigate(self, goal: NavigateGoal, ctx: GoalContext) -> NavigateResult:

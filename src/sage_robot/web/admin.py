@@ -22,7 +22,7 @@ from sage_robot.web.api import _pose, list_places
 from sage_robot.web.common import WebState, json_body, require_operator, state_of
 
 router = APIRouter(dependencies=[Depends(require_operator)])
-PLACE_NAME = re.compile(r"^[A-Z][A-Z0-9_]{0,47}$")  # the seed's waypoint names: CLEAN_ROOM
+PLACE_NAME = re.compile(r"^[A-Z0-9][A-Z0-9_]{0,47}$")  # the seed's waypoint names: CLEAN_ROOM
 MAX_TEXT = 500  # characters of a description
 MAX_ALIASES = 10
 LOG_LIMIT_MAX = 500

@@ -56,7 +56,7 @@ EVENTS_KEPT = 50  # recent events shown on a newly opened page
 AMCL_FRESH_S = 2.0  # prefer the AMCL pose over odometry while it is this recent (clock s)
 
 
-@dataclass
+@dataclass(eq=False)
 class Listener:
     """One WebSocket client's interest: changed channels and queued events."""
 

@@ -8,6 +8,7 @@ is then in :attr:`WebNode.port` and ``ctx.resources["web_url"]``.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import errno
 import logging
@@ -59,13 +60,16 @@ class WebNode(Node):
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
         )
         self.server = _QuietServer(config)
-        self.spawn(self.server.serve(sockets=[self.sock]), "web.server")
+        self._serve_task = self.spawn(self.server.serve(sockets=[self.sock]), "web.server")
         self.log.info("web server listening", url=self.url)
 
     async def teardown(self) -> None:
-        server = getattr(self, "server", None)
+        server, task = getattr(self, "server", None), getattr(self, "_serve_task", None)
         if server is not None:
-            server.should_exit = True
+            server.should_exit = True  # closes sockets (1012) and open connections
+        if task is not None and not task.done():
+            with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
+                await asyncio.wait_for(asyncio.shield(task), SHUTDOWN_GRACE_S + 1.0)
         teleop = getattr(self, "teleop", None)
         if teleop is not None and teleop.command != (0.0, 0.0):
             teleop._publish(0.0, 0.0)

@@ -79,6 +79,11 @@ async def _pump(ws: WebSocket, channels: tuple[str, ...], camera: bool = False) 
                 await ws.send_json(m)
             if frame_due and hub.frame:
                 await ws.send_bytes(hub.frame)
+    except (WebSocketDisconnect, RuntimeError, asyncio.CancelledError):
+        raise
+    except Exception:
+        _log.exception("websocket sender failed", path=ws.url.path)
+        raise
     finally:
         hub.unlisten(listener)
 

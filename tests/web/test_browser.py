@@ -1,0 +1,285 @@
+"""Every page in a real Chromium (Playwright) against the web node on the simulator.
+
+The robot moves because the page's key presses travel /ws/teleop -> /cmd_vel -> the real
+serial bridge -> CMD frames on a pty -> the firmware model -> ODOM frames -> /odom.
+Screenshots land in $SAGE_ARTIFACTS/web (default /tmp/sage-artifacts/web).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+
+from sage_robot.core import topics
+from sage_robot.core.msgs.voice import Doa, Phase, UiState
+
+pytestmark = pytest.mark.browser
+
+WAIT_S = 8.0  # longest any condition below may take
+MOVED_M = 0.05  # farther than this counts as "the robot moved"
+STILL_MPS = 0.01  # slower than this counts as stopped
+
+
+def wait_until(cond: Callable[[], Any], timeout: float = WAIT_S, what: str = "condition") -> Any:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = cond()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+
+
+def odom_xy(robot: Any) -> tuple[float, float]:
+    assert robot.odom is not None, "no odometry from the simulated MCU"
+    return robot.odom.pose.x, robot.odom.pose.y
+
+
+def moved_from(robot: Any, start: tuple[float, float]) -> float:
+    x, y = odom_xy(robot)
+    return math.hypot(x - start[0], y - start[1])
+
+
+def stopped(robot: Any) -> bool:
+    return robot.odom is not None and abs(robot.odom.twist.linear_x) < STILL_MPS
+
+
+class Console:
+    """Collects console errors and uncaught exceptions of a page."""
+
+    def __init__(self, page: Any) -> None:
+        self.errors: list[str] = []
+        page.on("console", lambda m: m.type == "error" and self.errors.append(m.text))
+        page.on("pageerror", lambda e: self.errors.append(f"uncaught: {e}"))
+
+
+@pytest.fixture(scope="module")
+def operator(browser: Any, robot: Any) -> Iterator[Any]:
+    """A browser context logged in through the login page."""
+    context = browser.new_context(viewport={"width": 1280, "height": 900})
+    page = context.new_page()
+    page.goto(f"{robot.url}/teleop")
+    assert "/login" in page.url, "the teleop page must ask for the login first"
+    page.fill("#password", robot.password)
+    page.click("button[type=submit]")
+    page.wait_for_url(f"{robot.url}/teleop", timeout=WAIT_S * 1000)
+    page.close()
+    yield context
+    context.close()
+
+
+def open_teleop(operator: Any, robot: Any) -> tuple[Any, Console]:
+    page = operator.new_page()
+    console = Console(page)
+    page.goto(f"{robot.url}/teleop")
+    page.wait_for_selector("#link.up", timeout=WAIT_S * 1000)
+    return page, console
+
+
+def test_every_page_loads_without_console_errors(operator: Any, robot: Any) -> None:
+    checks = {
+        "/": "#nodes tr",
+        "/teleop": "#map[data-map-version]",
+        "/face": "#mouth",
+        "/talk": "#ptt",
+        "/admin": "#nodes tr",
+    }
+    for path, selector in checks.items():
+        page = operator.new_page()
+        console = Console(page)
+        page.goto(f"{robot.url}{path}")
+        page.wait_for_selector(selector, timeout=WAIT_S * 1000, state="attached")
+        page.wait_for_timeout(600)  # let the sockets deliver a first round
+        name = path.strip("/") or "index"
+        page.screenshot(path=str(robot.artifacts / f"{name}.png"))
+        page.close()
+        assert console.errors == [], f"{path}: console errors {console.errors}"
+    assert "web" in robot.node_names
+
+
+def test_holding_arrow_up_drives_and_releasing_stops(operator: Any, robot: Any) -> None:
+    page, console = open_teleop(operator, robot)
+    wait_until(lambda: robot.odom is not None and stopped(robot), what="a still robot")
+    start = odom_xy(robot)
+    page.keyboard.down("ArrowUp")
+    try:
+        wait_until(lambda: moved_from(robot, start) > MOVED_M, what="odometry to change")
+        assert robot.odom is not None and robot.odom.twist.linear_x > 0.05
+        page.screenshot(path=str(robot.artifacts / "teleop-driving.png"))
+    finally:
+        page.keyboard.up("ArrowUp")
+    wait_until(lambda: stopped(robot), what="the robot to stop after release")
+    rest = odom_xy(robot)
+    time.sleep(0.5)
+    assert moved_from(robot, rest) < 0.02, "the robot kept moving after the key was released"
+    page.close()
+    assert console.errors == []
+
+
+def test_closing_the_page_while_driving_stops_the_robot(operator: Any, robot: Any) -> None:
+    page, _ = open_teleop(operator, robot)
+    teleop = robot.web_node().teleop
+    stops_before = teleop.counts["close_stops"] + teleop.counts["deadman_stops"]
+    start = odom_xy(robot)
+    page.keyboard.down("ArrowUp")
+    wait_until(lambda: moved_from(robot, start) > MOVED_M, what="the robot to drive")
+    page.close()  # the key is still held: only the server can stop the robot now
+    wait_until(lambda: stopped(robot), what="the robot to stop after the page closed")
+    assert teleop.counts["close_stops"] + teleop.counts["deadman_stops"] > stops_before
+
+
+def test_estop_blocks_driving_until_released_on_purpose(operator: Any, robot: Any) -> None:
+    page, console = open_teleop(operator, robot)
+    try:
+        page.click("#estop")
+        page.wait_for_selector("body[data-estop=true]", timeout=WAIT_S * 1000)
+        wait_until(lambda: stopped(robot), what="a still robot")
+        start = odom_xy(robot)
+        page.keyboard.down("ArrowUp")
+        page.wait_for_timeout(1200)
+        page.keyboard.up("ArrowUp")
+        assert moved_from(robot, start) < 0.02, "the robot moved with the e-stop engaged"
+        assert "e-stop" in page.text_content("#teleop-error")
+        page.screenshot(path=str(robot.artifacts / "teleop-estop.png"))
+        page.click("#release")  # one click is not enough: it asks for a confirmation
+        page.wait_for_timeout(300)
+        assert page.get_attribute("body", "data-estop") == "true"
+        page.click("#confirm-release")
+        page.wait_for_selector("body[data-estop=false]", timeout=WAIT_S * 1000)
+        page.keyboard.down("ArrowUp")
+        wait_until(lambda: moved_from(robot, start) > MOVED_M, what="driving after the release")
+        page.keyboard.up("ArrowUp")
+        wait_until(lambda: stopped(robot), what="the robot to stop")
+    finally:
+        robot.run(robot.web_node().teleop.set_estop(False, "test cleanup"))
+        page.close()
+    assert console.errors == []
+
+
+def test_click_on_the_map_sends_a_goal_and_the_robot_moves(operator: Any, robot: Any) -> None:
+    """Uses the real navigator when registered; otherwise the test's navigate_to server
+    (which drives straight while its goal runs) — ``robot.stand_ins`` says which."""
+    page, console = open_teleop(operator, robot)
+    page.wait_for_selector("#map[data-map-version]", timeout=WAIT_S * 1000)
+    wait_until(lambda: stopped(robot), what="a still robot")
+    start = odom_xy(robot)
+    goals_before = len(robot.goals)
+    page.locator("#map").scroll_into_view_if_needed()
+    box = page.locator("#map").bounding_box()
+    assert box is not None
+    page.mouse.click(box["x"] + box["width"] * 0.75, box["y"] + box["height"] * 0.5)
+    if "navigate_to" in robot.stand_ins:
+        wait_until(lambda: len(robot.goals) > goals_before, what="a navigate_to goal")
+        goal = robot.goals[-1]
+        assert goal.pose is not None and goal.place == ""
+        assert goal.pose.x > 0.5, f"the click right of centre should be at +x, got {goal.pose}"
+    wait_until(lambda: moved_from(robot, start) > MOVED_M, what="the robot to start moving")
+    page.wait_for_function("document.querySelector('#nav').textContent.length > 2")
+    page.screenshot(path=str(robot.artifacts / "teleop-goal.png"))
+    page.click("#cancel")
+    wait_until(lambda: stopped(robot), what="the robot to stop after cancel")
+    page.close()
+    assert console.errors == []
+
+
+def test_place_button_sends_a_named_goal(operator: Any, robot: Any) -> None:
+    page, _ = open_teleop(operator, robot)
+    page.click("#places button:has-text('DOCKING_STATION')")
+    if "navigate_to" in robot.stand_ins:
+        wait_until(lambda: robot.goals and robot.goals[-1].place == "DOCKING_STATION", what="a named goal")
+    page.click("#cancel")
+    wait_until(lambda: stopped(robot), what="the robot to stop after cancel")
+    page.close()
+
+
+def test_face_follows_ui_state_and_doa(browser: Any, robot: Any) -> None:
+    page = browser.new_page(viewport={"width": 1024, "height": 768})
+    console = Console(page)
+    page.goto(f"{robot.url}/face")
+    page.wait_for_selector("#link.up", timeout=WAIT_S * 1000)
+    robot.publish(topics.UI_STATE, UiState(Phase.LISTENING, asr_partial="where is the"))
+    page.wait_for_selector("body[data-phase=listening]", timeout=WAIT_S * 1000)
+    robot.publish(topics.DOA, Doa(0.0, 90.0))  # speaker on the robot's left
+    page.wait_for_function("Number(document.body.dataset.pupilX) > 10")
+    left = float(page.get_attribute("body", "data-pupil-x") or "nan")
+    robot.publish(topics.DOA, Doa(0.0, 270.0))  # on its right
+    page.wait_for_function("Number(document.body.dataset.pupilX) < -10")
+    right = float(page.get_attribute("body", "data-pupil-x") or "nan")
+    assert left > 0 > right
+    robot.publish(
+        topics.UI_STATE,
+        UiState(Phase.SPEAKING, asr_final="where is the lab?", llm_tokens="Follow me!", tts_viseme=1.0),
+    )
+    page.wait_for_selector("body[data-phase=speaking]", timeout=WAIT_S * 1000)
+    page.wait_for_function("Number(document.getElementById('mouth').getAttribute('ry')) > 30")
+    assert page.text_content("#reply") == "Follow me!"
+    assert page.text_content("#heard") == "where is the lab?"
+    page.screenshot(path=str(robot.artifacts / "face-speaking.png"))
+    robot.publish(topics.UI_STATE, UiState(Phase.THINKING))
+    page.wait_for_selector("body[data-phase=thinking]", timeout=WAIT_S * 1000)
+    page.close()
+    assert console.errors == []
+
+
+def test_talk_typed_question_gets_a_reply(browser: Any, robot: Any) -> None:
+    page = browser.new_page(viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True)
+    console = Console(page)
+    page.goto(f"{robot.url}/talk")
+    page.fill("#question", "Where is the clean room?")
+    page.click("button[type=submit]")
+    page.wait_for_selector(".bubble.sage", timeout=WAIT_S * 1000)
+    assert "first floor" in (page.text_content(".bubble.sage") or "")
+    assert page.text_content(".bubble.you") == "Where is the clean room?"
+    assert "Where is the clean room?" in robot.questions
+    page.screenshot(path=str(robot.artifacts / "talk-reply.png"))
+    page.close()
+    assert [e for e in console.errors if "/api/talk/say" not in e] == []
+
+
+def test_operator_pages_refuse_a_visitor(browser: Any, robot: Any) -> None:
+    context = browser.new_context()
+    page = context.new_page()
+    for path in ("/teleop", "/admin"):
+        page.goto(f"{robot.url}{path}")
+        assert "/login" in page.url
+    page.goto(f"{robot.url}/login")
+    page.fill("#password", "not the password")
+    page.click("button[type=submit]")
+    page.wait_for_function("document.getElementById('message').textContent.length > 0")
+    assert "wrong password" in (page.text_content("#message") or "")
+    # a visitor's page script cannot drive: the teleop socket refuses the handshake
+    refused = page.evaluate(
+        """() => new Promise((done) => {
+            const ws = new WebSocket(`ws://${location.host}/ws/teleop`);
+            ws.onopen = () => done("open");
+            ws.onclose = () => done("refused");
+        })"""
+    )
+    assert refused == "refused"
+    context.close()
+
+
+def test_admin_adds_a_place_by_clicking_the_map(operator: Any, robot: Any) -> None:
+    page = operator.new_page()
+    console = Console(page)
+    page.goto(f"{robot.url}/admin")
+    page.wait_for_selector("#map[data-map-version]", timeout=WAIT_S * 1000)
+    page.locator("#map").scroll_into_view_if_needed()
+    box = page.locator("#map").bounding_box()
+    assert box is not None
+    page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5)
+    assert page.input_value("#p-x") != ""
+    page.fill("#p-name", "ATRIUM")
+    page.fill("#p-desc", "the bright middle of the room")
+    page.fill("#p-aliases", "the atrium, middle")
+    page.click("#add-at-point")
+    page.wait_for_selector("#places td:has-text('ATRIUM')", timeout=WAIT_S * 1000)
+    text = (robot.tmp / "waypoints.yaml").read_text()
+    assert "ATRIUM" in text and "the atrium" in text
+    page.screenshot(path=str(robot.artifacts / "admin.png"))
+    page.close()
+    assert console.errors == []
