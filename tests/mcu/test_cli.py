@@ -1,0 +1,95 @@
+"""`sage mcu monitor` / `sage mcu drive` against the firmware model on a real pty, and
+port finding."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from sage_robot.cli.main import main
+from sage_robot.core.errors import DeviceNotConnectedError
+from sage_robot.hardware.mcu.port import find_port, open_port
+from sage_robot.sim.firmware import FirmwareModel
+from sage_robot.sim.mcu_pty import PtyMcu, RealTimeMcu
+
+
+def test_drive_sends_a_bounded_clamped_command_then_stops(capsys: pytest.CaptureFixture[str]):
+    with RealTimeMcu() as mcu:
+        rc = main(["mcu", "drive", "--port", mcu.port_name, "--v", "0.3", "--seconds", "0.6"])
+        fw = mcu.firmware
+        assert rc == 0
+        deadline = time.monotonic() + 2.0  # the model's thread reads the pty every 10 ms
+        while fw.last_command != (0.0, 0.0) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert fw.last_command == (0.0, 0.0)  # stopped at the end
+        assert fw.rx.frames >= 0.6 * 10  # re-sent at >= 10 Hz
+        assert mcu.floor.pose[0] > 0.05
+    out = capsys.readouterr().out
+    assert "driving v=0.3 m/s" in out and "stopped; last odometry x=+0." in out
+
+
+def test_drive_never_reverses_and_refuses_long_drives(capsys: pytest.CaptureFixture[str]):
+    with RealTimeMcu() as mcu:
+        assert main(["mcu", "drive", "--port", mcu.port_name, "--v", "-1", "--seconds", "0.2"]) == 0
+        assert mcu.floor.pose[0] == 0.0
+    assert "clamped to the profile's limits: v=0 m/s" in capsys.readouterr().out
+    assert main(["mcu", "drive", "--sim", "--seconds", "60"]) == 2
+    assert "--seconds must be in (0, 10]" in capsys.readouterr().err
+
+
+def test_monitor_prints_rates_values_and_errors(capsys: pytest.CaptureFixture[str]):
+    assert main(["mcu", "monitor", "--sim", "--seconds", "1.3"]) == 0
+    out = capsys.readouterr().out
+    assert "ODOM" in out and "BATTERY" in out and "IMU" in out and "%)" in out
+    assert "errors none" in out and "total: frames" in out
+
+
+def test_monitor_every_frame(capsys: pytest.CaptureFixture[str]):
+    assert main(["mcu", "monitor", "--sim", "--seconds", "0.3", "--frames"]) == 0
+    out = capsys.readouterr().out
+    assert "ODOM     x=" in out and "IMU      gx=" in out
+
+
+def test_monitor_on_a_silent_port_says_so(capsys: pytest.CaptureFixture[str]):
+    pty = PtyMcu(FirmwareModel())  # never pumped: nothing is sent
+    try:
+        assert main(["mcu", "monitor", "--port", pty.port_name, "--seconds", "0.2"]) == 2
+    finally:
+        pty.close()
+    assert "no frames decoded" in capsys.readouterr().err
+
+
+def test_missing_port_is_one_clear_line(capsys: pytest.CaptureFixture[str]):
+    assert main(["mcu", "monitor", "--port", "/nonexistent/ttyACM9"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot open MCU port /nonexistent/ttyACM9" in err and "Traceback" not in err
+
+
+def test_auto_detect_takes_the_first_ttyacm(tmp_path):
+    pattern = str(tmp_path / "ttyACM*")
+    with pytest.raises(DeviceNotConnectedError, match="no MCU serial port found"):
+        find_port("auto", pattern)
+    for name in ("ttyACM1", "ttyACM0"):
+        (tmp_path / name).touch()
+    assert find_port("auto", pattern) == str(tmp_path / "ttyACM0")
+    assert find_port("/dev/ttyUSB3", pattern) == "/dev/ttyUSB3"
+    with pytest.raises(DeviceNotConnectedError, match="cannot open MCU port"):
+        open_port(str(tmp_path / "ttyACM0"), 115200)  # a plain file is no serial port
+
+
+def test_pty_unplug_removes_the_link_and_replug_restores_it():
+    pty = PtyMcu(FirmwareModel())
+    try:
+        first = pty.slave_name
+        assert os.path.realpath(pty.port_name) == first
+        pty.unplug()
+        assert not os.path.exists(pty.port_name) and not pty.plugged
+        pty.pump(0.1)  # harmless while unplugged
+        pty.replug()
+        assert os.path.exists(pty.port_name) and pty.plugged
+        assert os.path.realpath(pty.port_name) == pty.slave_name
+    finally:
+        pty.close()
+    assert not os.path.exists(os.path.dirname(pty.port_name))
