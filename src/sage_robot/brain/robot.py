@@ -141,7 +141,7 @@ class RobotLink:
         return Outcome(True, data={"places": names, "status": "touring"})
 
     async def cancel(self) -> Outcome:
-        stopped = False
+        stopped, was = False, self.nav.target
         if self.bus.has_service(topics.CANCEL_NAV):
             try:
                 await self.bus.call(topics.CANCEL_NAV, Text(""), timeout=SERVICE_TIMEOUT_S)
@@ -151,7 +151,6 @@ class RobotLink:
         if self._goal is not None and not self._goal.done:
             await self._goal.cancel()
             stopped = True
-        was = self.nav.target
         self.nav = NavStatus()
         if not stopped:
             if self.bus.actions.has(topics.NAVIGATE_TO):
