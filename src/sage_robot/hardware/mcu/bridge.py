@@ -80,8 +80,9 @@ class SerialBridgeNode(Node):
         self.spawn(self._link_loop(), "serial_bridge.link")
 
     async def teardown(self) -> None:
-        if self._port is not None:
-            self._write(0.0, 0.0)
+        if getattr(self, "_port", None) is None:
+            return  # setup never opened anything
+        self._write(0.0, 0.0)  # the robot must not keep the last command
         self._close_port()
 
     # ------------------------------------------------------------ commands

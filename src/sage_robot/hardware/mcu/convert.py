@@ -98,8 +98,7 @@ class ImuCalibrator:
                 or np.max(np.abs(a - a_mean)) > self.motion_mps2
             ):
                 self.retries += 1
-                self._reset(t)
-                self._n, self._gyro_sum, self._accel_sum = 1, g.copy(), a.copy()
+                self._reset(None)  # a fresh window starts with the next sample
                 return CalibrationResult(False, moved=True)
         self._n += 1
         self._gyro_sum += g
