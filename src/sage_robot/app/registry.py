@@ -10,6 +10,9 @@ from sage_robot.core.node import Node
 
 NODES: dict[str, str] = {
     "heartbeat": "sage_robot.app.builtin:HeartbeatNode",
+    "map_server": "sage_robot.nav.map_server:MapServerNode",
+    "localization": "sage_robot.nav.localization:LocalizationNode",
+    "navigator": "sage_robot.nav.navigator:NavigatorNode",
     "sim_world": "sage_robot.sim.node:WorldNode",
     "kb": "sage_robot.kb.node:KbNode",
     "battery_watchdog": "sage_robot.app.battery_watchdog:BatteryWatchdogNode",

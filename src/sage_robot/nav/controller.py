@@ -33,6 +33,7 @@ COLLISION_HORIZON_S = 1.0  # max_allowed_time_to_collision_up_to_carrot
 COLLISION_STEP_M = 0.05
 MIN_COLLISION_CHECK_M = 0.5  # look at least this far ahead, however slow the command
 MIN_LOOKAHEAD_M = 0.3
+CLOSE_LOOKAHEAD_M = 0.4  # fallback carrot when the full-lookahead arc would collide (m)
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,17 @@ class PurePursuit:
         if self._at_goal_xy or dist_goal <= p.xy_tolerance_m:
             self._at_goal_xy = True
             return self._align(th)
-        carrot = self._carrot(x, y, max(MIN_LOOKAHEAD_M, min(p.lookahead_m, dist_goal)))
+        cmd = self._pursue(pose, max(MIN_LOOKAHEAD_M, min(p.lookahead_m, dist_goal)), dist_goal, costmap)
+        if cmd.blocked:
+            # the long arc cuts a corner the path goes around: hug the path with a short carrot
+            cmd = self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap)
+        return cmd
+
+    def _pursue(self, pose: tuple[float, float, float], lookahead: float, dist_goal: float,
+                costmap: Costmap | None) -> Command:
+        p = self.params
+        x, y, th = pose
+        carrot = self._carrot(x, y, lookahead)
         dx, dy = carrot[0] - x, carrot[1] - y
         c, s = math.cos(th), math.sin(th)
         lx, ly = c * dx + s * dy, -s * dx + c * dy
@@ -108,7 +119,7 @@ class PurePursuit:
             v *= p.max_w / abs(w)
             w = math.copysign(p.max_w, w)
         v = max(0.0, v)  # never reverse
-        if costmap is not None and self._collides(pose, v, w, costmap):
+        if costmap is not None and self._collides(pose, v, w, costmap, math.sqrt(l2)):
             return Command(0.0, 0.0, blocked=True)
         return Command(v, w)
 
@@ -136,15 +147,18 @@ class PurePursuit:
             v = min(v, self.params.max_v * costmap.speed_limit_at(pose[0], pose[1]))
         return v
 
-    def _collides(self, pose: tuple[float, float, float], v: float, w: float, costmap: Costmap) -> bool:
-        """Simulate the arc for COLLISION_HORIZON_S. A point in collision counts unless the robot
-        is already that close to an obstacle and the arc takes it no closer (leaving a wall)."""
+    def _collides(self, pose: tuple[float, float, float], v: float, w: float, costmap: Costmap,
+                  carrot_m: float) -> bool:
+        """Simulate the arc for COLLISION_HORIZON_S (at least MIN_COLLISION_CHECK_M, at most up to
+        the carrot, as Nav2). A point in collision counts unless the robot is already that close
+        to an obstacle and the arc takes it no closer (leaving a wall)."""
         if v <= 1e-6:
             return False
         x, y, th = pose
         here = costmap.distance_at(x, y)
         dt = COLLISION_STEP_M / v
-        n = max(1, int(max(COLLISION_HORIZON_S * v, MIN_COLLISION_CHECK_M) / COLLISION_STEP_M))
+        check_m = min(max(COLLISION_HORIZON_S * v, MIN_COLLISION_CHECK_M), max(carrot_m, COLLISION_STEP_M))
+        n = max(1, int(check_m / COLLISION_STEP_M))
         pts = []
         for _ in range(n):
             th += w * dt

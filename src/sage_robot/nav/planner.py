@@ -175,5 +175,5 @@ def path_blocked(costmap: Costmap, points: np.ndarray, ahead_m: float) -> bool:
     """Whether the first ``ahead_m`` of a path runs into a lethal/inscribed cell."""
     if len(points) == 0:
         return False
-    n = max(1, int(ahead_m / PATH_SPACING_M))
+    n = len(points) if math.isinf(ahead_m) else max(1, int(ahead_m / PATH_SPACING_M))
     return bool(costmap.blocked(points[:n]).any())

@@ -1,0 +1,284 @@
+"""Driving one goal: plan, follow, replan, recover — the behaviour tree of Nav2 in plain code.
+
+Recoveries run in order, each once, when the robot is blocked (no plan, or the forward
+collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
+
+1. clear the costmaps and replan;
+2. wait for people: publish an Event ``blocked_by_people`` (the voice says "excuse me"),
+   stop, and watch the intended path for up to ``nav.people_wait_s``; go on once it is free;
+3. replan around whatever is still there;
+4. spin in place (a full turn refreshes the costmaps), replan;
+5. abort with a reason a person understands.
+
+When localization is lost: stop, Event ``lost``, global relocalization while spinning
+slowly; if health does not come back within ``nav.relocalize_timeout_s``, Event
+``help_needed`` and abort. Time comes only from the node's clock; planning runs in a
+worker thread.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from sage_robot.core import topics
+from sage_robot.core.actions import ActionAborted
+from sage_robot.core.errors import ServiceError
+from sage_robot.core.geometry import wrap_angle
+from sage_robot.core.msgs import Text
+from sage_robot.core.msgs.nav import NavigateFeedback, NavigateResult, NavState
+from sage_robot.nav.controller import ControllerParams, PurePursuit
+from sage_robot.nav.planner import NoPath, Plan, path_blocked, plan
+
+if TYPE_CHECKING:
+    from sage_robot.nav.navigator import NavigatorNode
+
+LOCALIZED_WAIT_S = 10.0  # wait this long for a first pose before giving up
+PROGRESS_RESET_M = 1.0  # driving this far after a recovery resets the recovery ladder
+CLEAR_SETTLE_S = 0.5  # after clearing the costmaps, let fresh scans come in (s)
+WATCH_PERIOD_S = 0.5  # how often the intended path is checked while waiting for people (s)
+WATCH_AHEAD_M = 8.0  # how much of the intended path must be free to go on (m)
+SPIN_SPEED_RADPS = 0.6
+RELOC_SPIN_RADPS = 0.4
+LOST_CONFIRM_S = 1.0  # health must say "lost" this long before the robot stops (s)
+RELOCALIZED_CONFIRM_S = 2.0  # and "not lost" this long to count as relocalized (s)
+ETA_MIN_SPEED_MPS = 0.3
+KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
+
+
+@dataclass(frozen=True)
+class Target:
+    name: str  # canonical place name, "" for a pose
+    spoken: str  # how a person would say it ("the clean room")
+    pose: tuple[float, float, float]
+
+
+class Blocked(Exception):
+    """The way ahead is blocked (no plan, or the controller stopped for an obstacle)."""
+
+
+class GoalRun:
+    def __init__(self, node: NavigatorNode, target: Target, feedback: Callable[[Any], None]) -> None:
+        self.node, self.target, self._feedback = node, target, feedback
+        nav, robot = node.settings.nav, node.settings.robot
+        self.params = ControllerParams(robot.max_linear_mps, robot.max_angular_radps, nav.lookahead_m,
+                                       nav.xy_goal_tolerance_m, nav.yaw_goal_tolerance_rad)
+        self.dt = 1.0 / nav.controller_hz
+        self.clock = node.clock
+        self.state = NavState.PLANNING
+        self.remaining = 0.0
+        self.travelled = 0.0
+        self._last_xy: tuple[float, float] | None = None
+        self._level = 0
+        self._level_xy: tuple[float, float] | None = None
+        self._waited_s = 0.0
+
+    # ------------------------------------------------------------ small steps
+    def feedback(self, state: NavState) -> None:
+        self.state = state
+        eta = self.remaining / max(ETA_MIN_SPEED_MPS, self.params.max_v * 0.7)
+        self._feedback(NavigateFeedback(state, self.target.name, round(self.remaining, 2), round(eta, 1)))
+
+    def _track(self, pose: tuple[float, float, float]) -> None:
+        if self._last_xy is not None:
+            self.travelled += math.hypot(pose[0] - self._last_xy[0], pose[1] - self._last_xy[1])
+        self._last_xy = (pose[0], pose[1])
+        if self._level and self._level_xy is not None and \
+                math.hypot(pose[0] - self._level_xy[0], pose[1] - self._level_xy[1]) > PROGRESS_RESET_M:
+            self._level, self._level_xy = 0, None
+
+    def pose(self) -> tuple[float, float, float]:
+        pose = self.node.pose()
+        if pose is None:
+            raise ActionAborted("I don't know where I am yet")
+        return pose
+
+    async def _plan(self, with_obstacles: bool = True) -> Plan:
+        node, start = self.node, self.pose()
+        goal = self.target.pose[:2]
+
+        def work() -> Plan:
+            if with_obstacles:
+                node.refresh_global()
+                return plan(node.global_cm, start[:2], goal)
+            saved = node.global_cm.obstacles.copy()
+            node.global_cm.clear_obstacles()
+            try:
+                return plan(node.global_cm, start[:2], goal)
+            finally:
+                node.global_cm.obstacles[:] = saved
+                node.global_cm.refresh()
+
+        try:
+            result = await asyncio.to_thread(work)
+        except NoPath as exc:
+            raise Blocked(str(exc)) from None
+        node.publish_plan(result.points)
+        return result
+
+    # ------------------------------------------------------------ the goal
+    async def execute(self) -> NavigateResult:
+        t0 = self.clock.now()
+        await self._wait_localized()
+        while True:
+            try:
+                await self._drive()
+                return NavigateResult(True, self.target.name, "", round(self.travelled, 2),
+                                      round(self.clock.now() - t0, 2))
+            except Blocked as exc:
+                self.node.stop()
+                await self._recover(str(exc))
+
+    async def _wait_localized(self) -> None:
+        deadline = self.clock.now() + LOCALIZED_WAIT_S
+        while self.node.pose() is None:
+            if self.clock.now() >= deadline:
+                raise ActionAborted("I don't know where I am: localization has not started")
+            await self.clock.sleep(self.dt)
+
+    async def _drive(self) -> None:
+        """Plan and follow until arrival; raises Blocked."""
+        self.feedback(NavState.PLANNING)
+        current = await self._plan()
+        ctl = PurePursuit(current.points, self.params, self.target.pose[2])
+        replan_period = 1.0 / self.node.settings.nav.replan_hz
+        next_replan = self.clock.now() + replan_period
+        lost_since: float | None = None
+        self.feedback(NavState.DRIVING)
+        while True:
+            now = self.clock.now()
+            if self.node.lost():
+                lost_since = now if lost_since is None else lost_since
+                if now - lost_since >= LOST_CONFIRM_S:
+                    await self._relocalize()
+                    raise Blocked("relocalized")  # replan from the new pose
+            else:
+                lost_since = None
+            pose = self.pose()
+            self._track(pose)
+            cmd = ctl.step(pose, self.node.local_cm)
+            if cmd.arrived:
+                self.node.stop()
+                self.node.event("arrived", f"arrived at {self.target.spoken}", place=self.target.name)
+                return
+            if cmd.blocked:
+                raise Blocked("an obstacle is in the way")
+            self.node.command(cmd.v, cmd.w)
+            self.remaining = ctl.remaining_m()
+            if now >= next_replan:
+                next_replan = now + replan_period
+                self.feedback(NavState.DRIVING)
+                if not self._near_goal(pose):
+                    fresh = await self._plan()  # raises Blocked when there is no way now
+                    if self._switch(ctl, fresh):
+                        current, ctl = fresh, PurePursuit(fresh.points, self.params, self.target.pose[2])
+            await self.clock.sleep(self.dt)
+
+    def _switch(self, ctl: PurePursuit, fresh: Plan) -> bool:
+        """Keep following the current path while it is still free and not much longer than the
+        fresh one (so the robot does not flip sides around a person at every replan)."""
+        rest = ctl.path[ctl._i:]
+        if path_blocked(self.node.global_cm, rest, math.inf):
+            return True
+        return fresh.length_m < KEEP_PATH_RATIO * ctl.remaining_m()
+
+    def _near_goal(self, pose: tuple[float, float, float]) -> bool:
+        gx, gy, _ = self.target.pose
+        return math.hypot(pose[0] - gx, pose[1] - gy) < self.params.lookahead_m
+
+    # ------------------------------------------------------------ recoveries
+    async def _recover(self, why: str) -> None:
+        if why == "relocalized":
+            return
+        pose = self.pose()
+        self._level_xy = (pose[0], pose[1])
+        level, self._level = self._level, self._level + 1
+        self.feedback(NavState.RECOVERING)
+        if level == 0:
+            self.node.clear_costmaps()
+            await self.clock.sleep(CLEAR_SETTLE_S)
+        elif level == 1:
+            await self._wait_for_people()
+        elif level == 2:
+            pass  # replan around: the next _drive plans with everything the scans show now
+        elif level == 3:
+            await self._spin(2 * math.pi, SPIN_SPEED_RADPS)
+        else:
+            where = f"to {self.target.spoken}" if self.target.name else "to the goal"
+            waited = f"I waited {self._waited_s:.0f} s for people to step aside and " if self._waited_s else "I "
+            raise ActionAborted(f"the way {where} is blocked: {waited}found no way around")
+
+    async def _wait_for_people(self) -> None:
+        """Stop, say so, and watch the intended (obstacle-free) path until it clears."""
+        node = self.node
+        node.stop()
+        try:
+            intended = await self._plan(with_obstacles=False)
+        except Blocked:
+            return
+        self.feedback(NavState.WAITING_FOR_PEOPLE)
+        node.event("blocked_by_people", "excuse me, may I pass?", place=self.target.name)
+        t0 = self.clock.now()
+        wait_s = node.settings.nav.people_wait_s
+        while self.clock.now() - t0 < wait_s:
+            await self.clock.sleep(WATCH_PERIOD_S)
+            self._waited_s = self.clock.now() - t0
+            if await asyncio.to_thread(self._path_free, intended.points):
+                node.event("path_clear", "thank you", place=self.target.name)
+                return
+
+    def _path_free(self, points: np.ndarray) -> bool:
+        """Whether the intended path, from the robot on, is free in the global costmap with the
+        latest scan marked (ray tracing clears where people were). Runs in a worker thread."""
+        node = self.node
+        pose = node.pose()
+        if pose is None:
+            return False
+        node.refresh_global()
+        d = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
+        ahead = points[int(np.argmin(d)):]
+        ahead = ahead[np.hypot(ahead[:, 0] - pose[0], ahead[:, 1] - pose[1]) > self.params.xy_tolerance_m]
+        return not path_blocked(node.global_cm, ahead, WATCH_AHEAD_M)
+
+    async def _spin(self, angle: float, speed: float) -> None:
+        turned, last = 0.0, self.pose()[2]
+        t_end = self.clock.now() + angle / speed * 1.5
+        while turned < angle and self.clock.now() < t_end:
+            self.node.command(0.0, speed)
+            await self.clock.sleep(self.dt)
+            th = self.pose()[2]
+            turned += abs(wrap_angle(th - last))
+            last = th
+        self.node.stop()
+
+    async def _relocalize(self) -> None:
+        node = self.node
+        node.stop()
+        self.feedback(NavState.LOST)
+        node.event("lost", "I am not sure where I am; let me look around")
+        try:
+            await node.bus.call(topics.GLOBAL_LOCALIZATION, Text("navigator"))
+        except ServiceError as exc:
+            node.log.warning("global localization unavailable", error=str(exc))
+        deadline = self.clock.now() + node.settings.nav.relocalize_timeout_s
+        good_since: float | None = None
+        await self.clock.sleep(0.5)  # let the filter take the request
+        while self.clock.now() < deadline:
+            node.command(0.0, RELOC_SPIN_RADPS)
+            await self.clock.sleep(self.dt)
+            if node.lost():
+                good_since = None
+            elif good_since is None:
+                good_since = self.clock.now()
+            elif self.clock.now() - good_since >= RELOCALIZED_CONFIRM_S:
+                node.stop()
+                node.event("relocalized", "I know where I am again")
+                return
+        node.stop()
+        node.event("help_needed", "I am lost. Could someone help me, or set my position on the map?")
+        raise ActionAborted("I am lost and could not find where I am; I need help")

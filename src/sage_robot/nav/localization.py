@@ -1,0 +1,159 @@
+"""The ``localization`` node: AMCL on ``/scan`` + ``/odom`` (optionally EKF-fused with the IMU).
+
+Publishes ``/amcl_pose`` (with covariance) after each filter update, the map→odom
+correction on ``MAP_ODOM`` after each scan, and ``/localization/health`` (how well the
+scan fits the map at the estimate; lost below ``nav.lost_below``). The initial pose is
+the place ``nav.initial_place``; ``/initialpose`` resets it; the ``GLOBAL_LOCALIZATION``
+service spreads the particles over the whole map (the next few scans update the filter
+even without motion). Filter updates run in a worker thread.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core import topics
+from sage_robot.core.geometry import compose, inverse
+from sage_robot.core.msgs import Imu, LaserScan, Odometry, Pose2D, PoseStamped, PoseWithCovariance
+from sage_robot.core.msgs.nav import LocalizationHealth
+from sage_robot.core.node import Node
+from sage_robot.nav.amcl import ParticleFilter, scan_fit
+from sage_robot.nav.ekf import YawRateEkf
+from sage_robot.nav.mapdata import load_for
+
+Pose = tuple[float, float, float]
+
+HEALTH_WINDOW = 5  # scans averaged into the health score
+FORCED_UPDATES_AFTER_RESET = 8  # filter updates without motion after a global relocalization
+FORCED_UPDATE_PERIOD_S = 0.3  # how often those forced updates may run (s)
+MIN_INITIAL_SIGMA_XY_M = 0.05
+MIN_INITIAL_SIGMA_YAW_RAD = 0.05
+
+
+class LocalizationNode(Node):
+    name = "localization"
+
+    async def setup(self) -> None:
+        nav, lidar = self.settings.nav, self.settings.robot.lidar
+        self.data = load_for(self.settings)
+        self.pf = ParticleFilter(self.data.grid, np.random.default_rng(nav.seed), nav.min_particles,
+                                 nav.max_particles, (lidar.x_m, lidar.y_m, lidar.yaw_rad), nav.laser_beams)
+        self._lock = asyncio.Lock()
+        self._odom: Pose | None = None
+        self._ekf = YawRateEkf() if nav.use_ekf else None
+        self._scores: deque[float] = deque(maxlen=HEALTH_WINDOW)
+        self._forced = 0
+        self._last_forced = -math.inf
+        self._map_pose: Pose | None = None
+        self.health: LocalizationHealth | None = None
+        self.update_times: deque[float] = deque(maxlen=200)
+        self._global_pending = nav.initial_place not in self.data.places
+        if self._global_pending:
+            self.log.warning("initial place unknown: localizing globally", place=nav.initial_place)
+        else:
+            p = self.data.places.get(nav.initial_place).pose
+            self.pf.set_pose(p.x, p.y, p.theta)
+        self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=50)
+        if self._ekf is not None:
+            self.subscribe(topics.IMU, Imu, self._on_imu, maxsize=50)
+        self.subscribe(topics.INITIAL_POSE, PoseWithCovariance, self._on_initial_pose)
+        self._scans = self.subscribe(topics.SCAN, LaserScan, maxsize=1)
+        self.bus.serve(topics.GLOBAL_LOCALIZATION, self._global_service)
+        self.spawn(self._scan_loop(), "localization.scans")
+
+    # ------------------------------------------------------------ inputs
+    def _on_odom(self, msg: Odometry) -> None:
+        if self._ekf is None:
+            self._odom = msg.pose.as_tuple()
+            return
+        if self._odom is None:
+            self._ekf.reset(*msg.pose.as_tuple())
+        self._ekf.odom(msg.stamp, msg.twist.linear_x, msg.twist.angular_z)
+        self._odom = self._ekf.pose
+
+    def _on_imu(self, msg: Imu) -> None:
+        if self._ekf is not None and self._odom is not None:
+            self._ekf.imu(msg.stamp, msg.angular_velocity[2])
+            self._odom = self._ekf.pose
+
+    async def _on_initial_pose(self, msg: PoseWithCovariance) -> None:
+        cov = msg.covariance
+        sxy = max(math.sqrt(max(cov[0], cov[4], 0.0)), MIN_INITIAL_SIGMA_XY_M)
+        syaw = max(math.sqrt(max(cov[8], 0.0)), MIN_INITIAL_SIGMA_YAW_RAD)
+        async with self._lock:
+            self.pf.set_pose(msg.pose.x, msg.pose.y, msg.pose.theta, sxy, syaw)
+            self.pf._odom_ref = None
+            self._scores.clear()
+            self._forced = FORCED_UPDATES_AFTER_RESET
+        self.log.info("initial pose set", x=round(msg.pose.x, 2), y=round(msg.pose.y, 2))
+
+    async def _global_service(self, _request: Any) -> LocalizationHealth:
+        """Relocalize over the whole map from the next scan; answers the health before it."""
+        self._global_pending = True
+        return self.health or LocalizationHealth(self.clock.now(), 0.0, True, self.pf.count)
+
+    # ------------------------------------------------------------ the filter
+    async def _scan_loop(self) -> None:
+        async for scan in self._scans:
+            if self._odom is None:
+                continue
+            await self._process(scan, self._odom)
+
+    async def _process(self, scan: LaserScan, odom: Pose) -> None:
+        angles = scan.angles.astype(np.float64)
+        ranges = np.asarray(scan.ranges, dtype=np.float64)
+        async with self._lock:
+            if self._global_pending:
+                self._global_pending = False
+                await asyncio.to_thread(self.pf.global_localization, (angles, ranges, scan.range_max))
+                self._forced, self._scores = FORCED_UPDATES_AFTER_RESET, deque(maxlen=HEALTH_WINDOW)
+                self.log.info("global localization started", particles=self.pf.count)
+            now = self.clock.now()
+            force = self._forced > 0 and now - self._last_forced >= FORCED_UPDATE_PERIOD_S
+            if force or self.pf.moved_enough(odom):
+                t0 = asyncio.get_running_loop().time()
+                updated = await asyncio.to_thread(self.pf.update, odom, angles, ranges, scan.range_max, force)
+                self.update_times.append(asyncio.get_running_loop().time() - t0)
+                if updated and force:
+                    self._forced -= 1
+                    self._last_forced = now
+                if updated:
+                    self._publish_pose(scan.stamp)
+            pose = self.pf.pose_at(odom)
+        self._map_pose = pose
+        correction = compose(pose, inverse(odom))
+        self.bus.publish(topics.MAP_ODOM, PoseStamped(scan.stamp, "map", Pose2D(*correction)))
+        self._publish_health(scan, pose, angles, ranges)
+
+    def _publish_pose(self, stamp: float) -> None:
+        e = self.pf.estimate()
+        self.bus.publish(topics.AMCL_POSE,
+                         PoseWithCovariance(stamp, "map", Pose2D(e.x, e.y, e.theta), e.covariance))
+
+    def _publish_health(self, scan: LaserScan, pose: Pose, angles: np.ndarray, ranges: np.ndarray) -> None:
+        nav, lidar = self.settings.nav, self.settings.robot.lidar
+        fit = scan_fit(self.pf.field, pose, (lidar.x_m, lidar.y_m, lidar.yaw_rad), angles, ranges,
+                       scan.range_max, nav.health_tolerance_m)
+        if not math.isnan(fit):
+            self._scores.append(fit)
+        score = float(np.mean(self._scores)) if self._scores else 0.0
+        lost = len(self._scores) > 0 and score < nav.lost_below
+        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count)
+        self.bus.publish(topics.LOC_HEALTH, self.health)
+
+    async def teardown(self) -> None:
+        self.bus.unserve(topics.GLOBAL_LOCALIZATION)
+
+    def stats(self) -> dict[str, Any]:
+        times = sorted(self.update_times)
+        return {
+            "particles": self.pf.count,
+            "updates": self.pf.updates,
+            "update_ms_median": round(1000 * times[len(times) // 2], 2) if times else None,
+            "health": round(self.health.score, 3) if self.health else None,
+        }

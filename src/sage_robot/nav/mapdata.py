@@ -1,0 +1,54 @@
+"""Everything navigation loads for one map: the grid, its Nav2 filter masks and its places."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from sage_robot.core.config import Settings
+from sage_robot.core.errors import ConfigError
+from sage_robot.core.mapio import read_map
+from sage_robot.core.msgs import OccupancyGrid
+from sage_robot.core.paths import map_yaml, waypoints_yaml
+from sage_robot.core.places import Places, load_places
+from sage_robot.nav.costmap import Costmap
+
+
+@dataclass(frozen=True)
+class MapData:
+    path: Path
+    grid: OccupancyGrid
+    places: Places
+    keepout: OccupancyGrid | None = None
+    speed: OccupancyGrid | None = None
+
+    def costmap(self, inscribed_m: float, inflation_m: float, cost_scaling: float) -> Costmap:
+        return Costmap.from_grid(self.grid, inscribed_m, inflation_m, cost_scaling, self.keepout, self.speed)
+
+
+def _mask(explicit: str, map_path: Path, suffix: str) -> OccupancyGrid | None:
+    if explicit:
+        return read_map(explicit)
+    beside = map_path.with_name(f"{map_path.stem}_{suffix}.yaml")
+    return read_map(beside) if beside.exists() else None
+
+
+def load_map_data(map_path: str | Path, waypoints: str | Path | None = None, keepout: str = "",
+                  speed: str = "") -> MapData:
+    """Read a map, its masks (explicit paths, else ``NAME_keepout.yaml`` / ``NAME_speed.yaml``
+    beside the map) and its waypoints (else ``waypoints.yaml`` beside the map; none = no places)."""
+    path = Path(map_path)
+    grid = read_map(path)
+    if abs(grid.origin.theta) > 1e-6:
+        raise ConfigError(f"{path}: navigation needs a map whose origin yaw is 0")
+    wp = Path(waypoints) if waypoints else path.with_name("waypoints.yaml")
+    places = load_places(wp) if (waypoints or wp.exists()) else Places([], str(wp))
+    return MapData(path, grid, places, _mask(keepout, path, "keepout"), _mask(speed, path, "speed"))
+
+
+def load_for(settings: Settings) -> MapData:
+    """The map of a profile (``nav.map`` or the shipped building)."""
+    nav = settings.nav
+    wp = waypoints_yaml(settings)
+    return load_map_data(map_yaml(settings), wp if (nav.waypoints or wp.exists()) else None,
+                         nav.keepout_mask, nav.speed_mask)

@@ -1,0 +1,206 @@
+"""The ``navigator`` node: the ``navigate_to`` and ``tour`` actions, ``/plan``, cancel.
+
+Inputs: ``/odom`` + the map→odom correction (the pose), ``/scan`` (costmaps),
+``/localization/health``. The global costmap (static + keepout + obstacles with ray-trace
+clearing + inflation) is refreshed from the latest scan each time it plans; the rolling
+local costmap (``nav.local_costmap_m`` square, live scan only) is rebuilt on every scan and
+feeds the controller's proximity slowdown and forward collision check. How one goal is
+driven, and recovered, is :mod:`sage_robot.nav.drive`.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core import topics
+from sage_robot.core.actions import ActionAborted, GoalContext
+from sage_robot.core.geometry import compose
+from sage_robot.core.msgs import Event, LaserScan, Odometry, Pose2D, PoseStamped, Text, Twist
+from sage_robot.core.msgs import Path as PathMsg
+from sage_robot.core.msgs.nav import (
+    LocalizationHealth,
+    NavigateFeedback,
+    NavigateGoal,
+    NavigateResult,
+    NavState,
+    TourFeedback,
+    TourGoal,
+    TourResult,
+)
+from sage_robot.core.node import Node
+from sage_robot.core.places import Place
+from sage_robot.nav.costmap import Costmap
+from sage_robot.nav.drive import GoalRun, Target
+from sage_robot.nav.mapdata import load_for
+
+Pose = tuple[float, float, float]
+
+
+class NavigatorNode(Node):
+    name = "navigator"
+
+    async def setup(self) -> None:
+        s = self.settings
+        self.data = load_for(s)
+        self.global_cm = self.data.costmap(s.robot.radius_m, s.nav.inflation_radius_m,
+                                           s.nav.cost_scaling_factor)
+        self.local_cm: Costmap | None = None
+        self._odom: Pose | None = None
+        self._correction: Pose | None = None
+        self.scan: LaserScan | None = None
+        self.health: LocalizationHealth | None = None
+        self.commands = 0
+        self.goals = 0
+        self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=50)
+        self.subscribe(topics.MAP_ODOM, PoseStamped, self._on_correction)
+        self.subscribe(topics.SCAN, LaserScan, self._on_scan, maxsize=1)
+        self.subscribe(topics.LOC_HEALTH, LocalizationHealth, self._on_health)
+        self.bus.actions.serve(topics.NAVIGATE_TO, self._navigate)
+        self.bus.actions.serve(topics.TOUR, self._tour)
+        self.bus.serve(topics.CANCEL_NAV, self._cancel)
+        self.bus.serve(topics.CLEAR_COSTMAPS, self._clear)
+
+    async def teardown(self) -> None:
+        for action in (topics.NAVIGATE_TO, topics.TOUR):
+            self.bus.actions.unserve(action)
+        for service in (topics.CANCEL_NAV, topics.CLEAR_COSTMAPS):
+            self.bus.unserve(service)
+        self.stop()
+
+    # ------------------------------------------------------------ inputs
+    def _on_odom(self, msg: Odometry) -> None:
+        self._odom = msg.pose.as_tuple()
+
+    def _on_correction(self, msg: PoseStamped) -> None:
+        self._correction = msg.pose.as_tuple()
+
+    def _on_health(self, msg: LocalizationHealth) -> None:
+        self.health = msg
+
+    def _on_scan(self, msg: LaserScan) -> None:
+        self.scan = msg
+        pose = self.pose()
+        if pose is None:
+            return
+        local = self.global_cm.window(pose[0], pose[1], self.settings.nav.local_costmap_m)
+        local.update_scan(self.sensor_pose(pose), msg.angles, msg.ranges, msg.range_max)
+        self.local_cm = local
+
+    # ------------------------------------------------------------ helpers for GoalRun
+    def pose(self) -> Pose | None:
+        """The robot's pose in the map: correction ∘ odometry; None until localized."""
+        if self._odom is None or self._correction is None:
+            return None
+        return compose(self._correction, self._odom)
+
+    def sensor_pose(self, pose: Pose) -> Pose:
+        lidar = self.settings.robot.lidar
+        return compose(pose, (lidar.x_m, lidar.y_m, lidar.yaw_rad))
+
+    def lost(self) -> bool:
+        return bool(self.health is not None and self.health.lost)
+
+    def command(self, v: float, w: float) -> None:
+        if v < 0.0:
+            raise AssertionError("the navigator never reverses")  # broken code, not bad input
+        self.commands += 1
+        self.bus.publish(topics.CMD_VEL, Twist(float(v), float(w)))
+
+    def stop(self) -> None:
+        self.bus.publish(topics.CMD_VEL, Twist())
+
+    def event(self, kind: str, message: str, **data: str) -> None:
+        self.bus.publish(topics.EVENTS, Event(self.clock.now(), self.name, kind, message, dict(data)))
+
+    def publish_plan(self, points: np.ndarray) -> None:
+        poses = tuple(Pose2D(float(x), float(y), 0.0) for x, y in points[::4])
+        self.bus.publish(topics.PLAN, PathMsg(self.clock.now(), "map", poses))
+
+    def refresh_global(self) -> None:
+        """Mark the latest scan into the global costmap (runs in the planning thread)."""
+        pose, scan = self.pose(), self.scan
+        if pose is not None and scan is not None:
+            self.global_cm.update_scan(self.sensor_pose(pose), scan.angles, scan.ranges, scan.range_max)
+
+    def clear_costmaps(self) -> None:
+        self.global_cm.clear_obstacles()
+        if self.local_cm is not None:
+            self.local_cm.clear_obstacles()
+
+    # ------------------------------------------------------------ services
+    async def _cancel(self, _request: Any) -> Text:
+        stopped = []
+        for action in (topics.TOUR, topics.NAVIGATE_TO):
+            handle = self.bus.actions.active(action)
+            if handle is not None:
+                await handle.cancel()
+                stopped.append(action)
+        self.stop()
+        return Text("canceled " + ", ".join(stopped) if stopped else "nothing to cancel")
+
+    async def _clear(self, _request: Any) -> Text:
+        self.clear_costmaps()
+        return Text("cleared")
+
+    # ------------------------------------------------------------ actions
+    def resolve(self, goal: NavigateGoal) -> Target:
+        if goal.pose is not None and goal.place:
+            raise ActionAborted("give a place or a pose, not both")
+        if goal.pose is not None:
+            p = goal.pose
+            if not all(math.isfinite(v) for v in (p.x, p.y, p.theta)):
+                raise ActionAborted("the goal pose is not a finite number")
+            return Target("", "the goal", (p.x, p.y, p.theta))
+        if not goal.place.strip():
+            raise ActionAborted("no place or pose given")
+        place: Place | None = self.data.places.resolve(goal.place)
+        if place is None:
+            known = ", ".join(self.data.places.names()) or "none"
+            raise ActionAborted(f"I don't know a place called '{goal.place}' (places: {known})")
+        spoken = place.name.replace("_", " ").lower()
+        return Target(place.name, spoken, place.pose.as_tuple())
+
+    async def _navigate(self, goal: NavigateGoal, ctx: GoalContext) -> NavigateResult:
+        tour = self.bus.actions.active(topics.TOUR)
+        if tour is not None:  # a new goal from outside ends a running tour
+            await tour.cancel()
+        target = self.resolve(goal)
+        return await self.drive_to(target, ctx.feedback)
+
+    async def drive_to(self, target: Target, feedback: Any) -> NavigateResult:
+        self.goals += 1
+        run = GoalRun(self, target, feedback)
+        try:
+            return await run.execute()
+        finally:
+            self.stop()
+
+    async def _tour(self, goal: TourGoal, ctx: GoalContext) -> TourResult:
+        nav = self.bus.actions.active(topics.NAVIGATE_TO)
+        if nav is not None:
+            await nav.cancel()
+        if not 0 <= goal.start_index <= len(goal.places):
+            raise ActionAborted(f"start_index {goal.start_index} is outside the tour of {len(goal.places)}")
+        completed: list[str] = []
+        targets = [self.resolve(NavigateGoal(place=p)) for p in goal.places]
+        for i in range(goal.start_index, len(targets)):
+            t = targets[i]
+
+            def relay(fb: NavigateFeedback, i: int = i, t: Target = t) -> None:
+                ctx.feedback(TourFeedback(i, t.name, fb.state))
+
+            result = await self.drive_to(t, relay)
+            if not result.succeeded:
+                why = f"stopped at stop {i + 1} ({t.name}): {result.reason}"
+                return TourResult(tuple(completed), False, why)
+            completed.append(t.name)
+            ctx.feedback(TourFeedback(i, t.name, NavState.IDLE))
+            if i < len(targets) - 1:
+                await self.clock.sleep(goal.dwell_s)
+        return TourResult(tuple(completed), True)
+
+    def stats(self) -> dict[str, Any]:
+        return {"goals": self.goals, "commands": self.commands}

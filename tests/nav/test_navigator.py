@@ -1,0 +1,176 @@
+"""The navigation nodes on the bus, driven by a kinematic simulator on the SimClock."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+from nav_grids import draw
+from nav_sim import running, settings_for, wait_until, write_building
+
+from sage_robot.core import topics
+from sage_robot.core.actions import GoalStatus
+from sage_robot.core.msgs import Event, Pose2D, Text
+from sage_robot.core.msgs.nav import NavigateGoal, NavState, PlaceList, TourGoal
+
+# Two rooms joined by a corridor; 0.5 m per character.
+NARROW = """
+######################
+#......#######.......#
+#......#######.......#
+#....................#
+#....................#
+#......#######.......#
+#......#######.......#
+######################
+"""
+WIDE = """
+######################
+#....................#
+#....................#
+#....................#
+#....................#
+#....................#
+#....................#
+######################
+"""
+A, B = (1.5, 2.0, 0.0), (9.5, 2.0, 0.0)
+REAL_TIMEOUT_S = 90.0
+GOAL_TOLERANCE_TRUTH_M = 0.4  # xy goal tolerance (0.25 m, on the estimate) + localization error
+
+
+def _building(tmp_path, picture, **nav):
+    grid = draw(picture, 0.05, scale=10)
+    path = write_building(tmp_path, grid, {"ROOM_A": A, "ROOM_B": B})
+    return grid, settings_for(path, "ROOM_A", **nav)
+
+
+def _events(bus):
+    got: list[Event] = []
+    bus.subscribe(topics.EVENTS, Event, got.append, maxsize=100)
+    return got
+
+
+async def _go(bus, place):
+    return await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=place))
+
+
+async def test_drives_to_a_place_by_alias(tmp_path) -> None:
+    grid, settings = _building(tmp_path, WIDE)
+    async with running(settings, grid, A) as (bus, _clock, sim):
+        events = _events(bus)
+        places = await bus.call(topics.PLACES, Text(""))
+        assert isinstance(places, PlaceList) and {p.name for p in places.places} == {"ROOM_A", "ROOM_B"}
+        handle = await _go(bus, "room b")
+        states = set()
+
+        async def watch():
+            async for fb in handle.feedback():
+                states.add(fb.state)
+
+        watcher = asyncio.ensure_future(watch())
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        await watcher
+        assert result.ok, result.message
+        assert result.value.succeeded and result.value.place == "ROOM_B"
+        x, y, _ = sim.pose
+        assert math.hypot(x - B[0], y - B[1]) <= GOAL_TOLERANCE_TRUTH_M
+        assert NavState.DRIVING in states
+        assert any(e.kind == "arrived" and e.data == {"place": "ROOM_B"} for e in events)
+        assert sim.collisions == 0
+        assert not sim.reversed_commands()
+        assert sim.cmds[-1][1].is_zero
+        where = await bus.call(topics.WHERE_AM_I, Text(""))
+        assert where.nearest_place == "ROOM_B" and where.localized
+
+
+async def test_waits_for_a_person_then_goes_on(tmp_path) -> None:
+    grid, settings = _building(tmp_path, NARROW, people_wait_s=30.0)
+    async with running(settings, grid, A) as (bus, clock, sim):
+        events = _events(bus)
+        sim.people.append([5.25, 2.0])  # standing in the 1 m corridor
+        handle = await _go(bus, "ROOM_B")
+        await asyncio.wait_for(
+            wait_until(clock, lambda: any(e.kind == "blocked_by_people" for e in events), 60, "the event"),
+            REAL_TIMEOUT_S)
+        assert handle.last_feedback.state in (NavState.WAITING_FOR_PEOPLE, NavState.RECOVERING)
+        await clock.sleep(3.0)
+        assert not handle.done  # still waiting, not aborted
+        sim.people.clear()  # they step aside
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        assert result.ok, result.message
+        assert sim.collisions == 0 and not sim.reversed_commands()
+
+
+async def test_goes_around_a_person_who_never_moves(tmp_path) -> None:
+    grid, settings = _building(tmp_path, WIDE, people_wait_s=5.0)
+    async with running(settings, grid, A) as (bus, _clock, sim):
+        sim.people.append([5.25, 2.0])  # in the middle of a 3 m wide hall
+        handle = await _go(bus, "ROOM_B")
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        assert result.ok, result.message
+        assert sim.collisions == 0 and not sim.reversed_commands()
+        closest = min(math.hypot(x - 5.25, y - 2.0) for _, x, y, _ in sim.truth)
+        assert closest > 0.5 + 0.1  # body radii plus a margin
+
+
+async def test_fully_blocked_corridor_aborts_with_a_reason(tmp_path) -> None:
+    grid, settings = _building(tmp_path, NARROW, people_wait_s=3.0)
+    async with running(settings, grid, A) as (bus, _clock, sim):
+        events = _events(bus)
+        sim.people.append([5.25, 2.0])
+        handle = await _go(bus, "ROOM_B")
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        assert result.status is GoalStatus.ABORTED
+        assert "blocked" in result.message and "room b" in result.message
+        assert any(e.kind == "blocked_by_people" for e in events)
+        assert sim.collisions == 0 and not sim.reversed_commands()
+        assert sim.cmds[-1][1].is_zero
+
+
+async def test_cancel_stops_the_robot_and_preempt_switches_goal(tmp_path) -> None:
+    grid, settings = _building(tmp_path, WIDE)
+    async with running(settings, grid, A) as (bus, clock, sim):
+        first = await _go(bus, "ROOM_B")
+        await clock.sleep(4.0)
+        assert sim.cmds and not sim.cmds[-1][1].is_zero
+        reply = await bus.call(topics.CANCEL_NAV, Text(""))
+        assert "navigate_to" in reply.data
+        result = await asyncio.wait_for(first.result(), REAL_TIMEOUT_S)
+        assert result.status is GoalStatus.CANCELED
+        assert sim.cmds[-1][1].is_zero
+        moved_at_cancel = sim.pose
+        await clock.sleep(2.0)
+        assert math.hypot(sim.pose[0] - moved_at_cancel[0], sim.pose[1] - moved_at_cancel[1]) < 0.05
+        # preempt: a goal to B, then one back to A before B is reached
+        to_b = await _go(bus, "ROOM_B")
+        await clock.sleep(2.0)
+        to_a = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(pose=Pose2D(*A)))
+        assert (await asyncio.wait_for(to_b.result(), REAL_TIMEOUT_S)).status is GoalStatus.PREEMPTED
+        result = await asyncio.wait_for(to_a.result(), REAL_TIMEOUT_S)
+        assert result.ok, result.message
+        assert math.hypot(sim.pose[0] - A[0], sim.pose[1] - A[1]) <= GOAL_TOLERANCE_TRUTH_M
+        assert not sim.reversed_commands()
+
+
+async def test_unknown_place_aborts_with_the_known_places(tmp_path) -> None:
+    grid, settings = _building(tmp_path, WIDE)
+    async with running(settings, grid, A) as (bus, _clock, _sim):
+        result = await asyncio.wait_for((await _go(bus, "the moon base")).result(), REAL_TIMEOUT_S)
+        assert result.status is GoalStatus.ABORTED
+        assert "the moon base" in result.message and "ROOM_B" in result.message
+
+
+async def test_tour_visits_in_order_and_resumes(tmp_path) -> None:
+    grid, settings = _building(tmp_path, WIDE)
+    async with running(settings, grid, A) as (bus, _clock, sim):
+        events = _events(bus)
+        handle = await bus.actions.send_goal(topics.TOUR, TourGoal(("ROOM_B", "ROOM_A"), 2.0, start_index=1))
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        assert result.ok and result.value.succeeded and result.value.completed == ("ROOM_A",)
+        handle = await bus.actions.send_goal(topics.TOUR, TourGoal(("ROOM_B", "ROOM_A"), 2.0))
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        assert result.value.completed == ("ROOM_B", "ROOM_A"), result
+        arrived = [e.data["place"] for e in events if e.kind == "arrived"]
+        assert arrived == ["ROOM_A", "ROOM_B", "ROOM_A"]
+        assert sim.collisions == 0 and not sim.reversed_commands()
