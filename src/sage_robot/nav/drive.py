@@ -210,7 +210,8 @@ class GoalRun:
             await self._spin(2 * math.pi, SPIN_SPEED_RADPS)
         else:
             where = f"to {self.target.spoken}" if self.target.name else "to the goal"
-            waited = f"I waited {self._waited_s:.0f} s for people to step aside and " if self._waited_s else "I "
+            waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
+                if self._waited_s else "I "
             raise ActionAborted(f"the way {where} is blocked: {waited}found no way around")
 
     async def _wait_for_people(self) -> None:
