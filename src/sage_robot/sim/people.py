@@ -121,7 +121,7 @@ def _lateral(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([-d[1] / n, d[0] / n])
 
 
-Clearance = Any  # callable (x, y) -> metres to the nearest wall (vectorized)
+Clearance = Any  # callable (x, y) -> metres to the nearest wall (float)
 
 
 class Crowd:
@@ -251,12 +251,12 @@ class Crowd:
         for _ in range(50):
             x = p.x + float(self.rng.uniform(-8, 8))
             y = p.y + float(self.rng.uniform(-8, 8))
-            if float(self.clearance(x, y)[0]) > PERSON_RADIUS_M + 0.3:
+            if self.clearance(x, y) > PERSON_RADIUS_M + 0.3:
                 return (x, y)
         return (p.x, p.y)
 
     def _free(self, x: float, y: float) -> bool:
-        return float(self.clearance(x, y)[0]) >= PERSON_RADIUS_M + WALL_MARGIN_M
+        return self.clearance(x, y) >= PERSON_RADIUS_M + WALL_MARGIN_M
 
     def _move_toward(
         self,

@@ -73,7 +73,7 @@ class World:
             dtype=np.float64,
         ).reshape(-1, 6)
         self.crowd = Crowd(
-            list(people or []), lanes, self.raycaster.clearance, self.rng_people, self.line_of_sight
+            list(people or []), lanes, self.raycaster.clearance_at, self.rng_people, self.line_of_sight
         )
         self._camera: Camera | None = None
         self.x, self.y, self.theta = start
@@ -133,7 +133,7 @@ class World:
         """Everything a body at (x, y) would overlap, as 'kind:name' strings."""
         r = self.robot_radius
         out = set()
-        if float(self.raycaster.clearance(x, y)[0]) < r:
+        if self.raycaster.clearance_at(x, y) < r:
             out.add("wall:map")
         if self._boxes.size:
             d = _box_distance(x, y, self._boxes)

@@ -1,0 +1,130 @@
+"""Scenarios: parsing with clear errors, the world node on the simulated clock, `sage sim --headless`."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sage_robot.app.launcher import NodeSpec
+from sage_robot.app.runtime import make_context, run_launcher
+from sage_robot.core import topics
+from sage_robot.core.config import load_profile
+from sage_robot.core.errors import ConfigError
+from sage_robot.core.msgs import CompressedImage, Event, LaserScan, Odometry
+from sage_robot.core.msgs.sim import People, SpeakerBearing
+from sage_robot.core.msgs.voice import Doa
+from sage_robot.sim.node import SCENARIO_RESOURCE, WORLD_RESOURCE, WorldNode
+from sage_robot.sim.scenario import load_scenario, parse_scenario
+
+BENCH_RUN = """
+name: bench_in_the_way
+seed: 4
+pedestrians: 0
+default_clutter: false
+people:
+  - {kind: stander, at: [50.3, 59.8]}
+clutter:
+  - {name: test_bench, kind: bench, center: [50.0, 57.5], size: [0.45, 1.6], height: 0.45}
+events:
+  - {at: 0.5, cmd_vel: [0.5, 0.0]}
+"""
+
+
+def write(tmp_path: Path, text: str, name: str = "s.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("speed: 3\n", "unknown key(s) speed"),
+        ("events:\n  - {at: 1, cmd_vel: fast}\n", "cmd_vel must be [v m/s, w rad/s]"),
+        ("events:\n  - {at: 1, dance: true}\n", "needs exactly one of"),
+        ("battery: 1.5\n", "battery is a charge fraction"),
+        ("clutter:\n  - {size: [1, 1]}\n", "needs 'center: [x, y]'"),
+        ("[1, 2]\n", "a scenario is a YAML mapping"),
+    ],
+)
+def test_bad_scenarios_say_what_is_wrong(tmp_path: Path, text: str, message: str) -> None:
+    with pytest.raises(
+        ConfigError, match=message.replace("[", r"\[").replace("(", r"\(").replace(")", r"\)")
+    ):
+        load_scenario(write(tmp_path, text))
+
+
+def test_scenario_fields_and_overrides(tmp_path: Path) -> None:
+    sc = load_scenario(write(tmp_path, BENCH_RUN + "map: other/map.yaml\nduration_s: 5\nbattery: 0.4\n"))
+    assert sc.name == "bench_in_the_way" and sc.duration_s == 5.0 and sc.battery == 0.4
+    assert sc.clutter[0].name == "test_bench" and sc.events[0].value == (0.5, 0.0)
+    over = sc.settings_overrides()
+    assert over["sim"] == {"world_map": str(tmp_path / "other/map.yaml"), "seed": 4, "pedestrians": 0}
+    assert over["nav"]["map"] == str(tmp_path / "other/map.yaml")
+    with pytest.raises(ConfigError, match="not found"):
+        load_scenario(tmp_path / "missing.yaml")
+
+
+async def test_world_node_runs_a_scenario_on_the_sim_clock() -> None:
+    scenario = parse_scenario(__import__("yaml").safe_load(BENCH_RUN), "bench_run")
+    settings = load_profile(None, {"sim": {"speed": None, **scenario.settings_overrides()["sim"]}})
+    ctx = make_context(settings, simulated=True)
+    ctx.resources[SCENARIO_RESOURCE] = scenario
+    got: dict[str, list[Any]] = {}
+
+    def collect(topic: str, kind: type) -> None:
+        got[topic] = []
+        ctx.bus.subscribe(topic, kind, got[topic].append, maxsize=1000)
+
+    for topic, kind in [
+        (topics.SCAN, LaserScan), (topics.SIM_COLLISIONS, Event), (topics.SIM_TRUTH, Odometry),
+        (topics.SIM_PEOPLE, People), (topics.SIM_SPEAKER, SpeakerBearing), (topics.CAMERA, CompressedImage),
+        (topics.SIM_SPEAKER_BEARING, Doa),
+    ]:  # fmt: skip
+        collect(topic, kind)
+    await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=6.0)
+    world = ctx.resources[WORLD_RESOURCE]
+    assert 58 <= len(got[topics.SCAN]) <= 61  # 10 Hz
+    assert 290 <= len(got[topics.SIM_TRUTH]) <= 301  # 50 Hz
+    assert got[topics.CAMERA] and got[topics.SIM_PEOPLE]
+    # The robot drove east from the dock into the bench; the lidar never saw the bench.
+    assert world.collisions == 1
+    (event,) = got[topics.SIM_COLLISIONS]
+    assert event.kind == "collision" and event.data["name"] == "low_obstacle:test_bench"
+    assert world.x == pytest.approx(50.0 - 0.225 - 0.25, abs=0.02)
+    last = got[topics.SCAN][-1]
+    ahead = last.ranges[np.argmin(np.abs(last.angles))]
+    assert ahead > 1.0  # the corridor's far wall (1.6 m), not the bench 0.1 m away
+    # The stander 2.4 m north-east is "the speaker" once the robot is within 3 m.
+    assert got[topics.SIM_SPEAKER][-1].present
+    assert got[topics.SIM_SPEAKER_BEARING] and got[topics.SIM_SPEAKER_BEARING][-1].source == "sim"
+    assert 90.0 < got[topics.SIM_SPEAKER_BEARING][-1].angle_deg < 180.0  # ahead and to the left
+
+
+def run_cli(*args: str, timeout: float = 150.0) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "sage_robot.cli.main", *args], capture_output=True,
+                          text=True, timeout=timeout)  # fmt: skip
+
+
+def test_sage_sim_headless_runs_a_scenario_and_prints_a_summary(tmp_path: Path) -> None:
+    path = write(tmp_path, BENCH_RUN + "duration_s: 3\n")
+    proc = run_cli("--log-level", "WARNING", "sim", "--headless", "--fast", "--json", "--scenario", str(path),
+                   "--nodes", "sim_world,mcu_sim,serial_bridge")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert summary["scenario"] == "bench_in_the_way"
+    assert summary["sim_time_s"] == pytest.approx(3.0, abs=0.02)
+    assert summary["collisions"] == 0 and summary["distance_m"] > 0.3  # the MCU model drove it
+    assert summary["nodes_failed"] == []
+
+
+def test_sage_sim_reports_a_bad_scenario_in_one_line(tmp_path: Path) -> None:
+    proc = run_cli("sim", "--headless", "--scenario", str(write(tmp_path, "events: 3\n")), timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().startswith("sage: error:") and "Traceback" not in proc.stderr
