@@ -29,6 +29,7 @@ LOG_LIMIT_MAX = 500
 
 _log = get_logger("web")
 _places_lock = asyncio.Lock()
+KB_SERVICE = "kb_service"  # ctx.resources key of the KB node's service (sage_robot.kb.node)
 
 
 @router.get("/api/admin/logs")
@@ -103,29 +104,40 @@ def _robot_pose(st: WebState) -> Pose2D:
 
 
 def mount_kb(app: FastAPI, st: WebState) -> None:
-    """Include the knowledge base's router when the KB is installed; the admin page says so otherwise."""
-    try:
-        from sage_robot.kb.api import make_router  # type: ignore[import-not-found,unused-ignore]
-    except ImportError as exc:
-        st.extras["kb"] = f"the knowledge base is not installed ({exc.name or exc})"
-        return
-    service = st.node.ctx.resources.get("kb_service")
-    if service is None:
-        try:
-            from sage_robot.kb.service import KbService
+    """Include the knowledge base's router (``/api/kb/*``, ``/kb/admin``) when the KB is installed.
 
-            service = KbService(st.node.settings.kb)  # type: ignore[call-arg,unused-ignore]
-        except Exception as exc:
-            st.extras["kb"] = f"the knowledge base could not start: {exc}"
-            return
-    app.include_router(make_router(service, require_operator))
-    st.extras["kb"] = ""
+    The service is the KB node's, looked up on each request (503 while it is not running).
+    """
+    try:
+        from sage_robot.kb.api import make_router
+    except ImportError as exc:
+        st.extras["kb_missing"] = f"the knowledge base is not installed ({exc.name or exc})"
+        return
+    resources = st.node.ctx.resources
+    settings = st.node.settings
+    app.include_router(
+        make_router(
+            lambda: resources.get(KB_SERVICE),
+            require_operator,
+            email=settings.email,
+            secrets_file=settings.secrets_file or None,
+        )
+    )
+
+
+def kb_status(st: WebState) -> str:
+    """Empty when the KB answers; else why not, for a person."""
+    if st.extras.get("kb_missing"):
+        return str(st.extras["kb_missing"])
+    if st.node.ctx.resources.get(KB_SERVICE) is None:
+        return "the knowledge base node is not running (add \"kb\" to the profile's nodes)"
+    return ""
 
 
 @router.get("/api/admin/info")
 async def info(request: Request) -> dict[str, Any]:
     st = state_of(request)
     return {
-        "kb": st.extras.get("kb", ""),
+        "kb": kb_status(st),
         "waypoints": str(waypoints_yaml(st.node.settings)),
     }

@@ -19,7 +19,6 @@ from typing import Any
 
 from sage_robot.core import topics
 from sage_robot.core.msgs import (
-    REGISTRY,
     BatteryState,
     CompressedImage,
     Event,
@@ -31,6 +30,7 @@ from sage_robot.core.msgs import (
     PoseWithCovariance,
 )
 from sage_robot.core.msgs.nav import LocalizationHealth
+from sage_robot.core.msgs.sim import People
 from sage_robot.core.msgs.voice import Doa, UiState
 from sage_robot.core.node import Node
 from sage_robot.web import views
@@ -108,9 +108,7 @@ class Hub:
         sub(topics.CAMERA, CompressedImage, self._on_camera, maxsize=2)
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
         sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
-        people = REGISTRY.get("People")  # the simulator's people, when the simulator is installed
-        if people is not None:
-            sub(topics.SIM_PEOPLE, people, self._on_people)
+        sub(topics.SIM_PEOPLE, People, self._on_people)  # published only by the simulator
         self.set("estop", {"type": "estop", "engaged": False})
 
     # ------------------------------------------------------------ fan-out
@@ -199,7 +197,7 @@ class Hub:
         p = msg.pose
         self.set("goal", {"type": "goal", "x": p.x, "y": p.y, "theta": p.theta, "place": ""})
 
-    def _on_people(self, msg: Any) -> None:
+    def _on_people(self, msg: People) -> None:
         self.set("people", {"type": "people", "points": views.people_points(msg)})
 
     def _on_loc(self, msg: LocalizationHealth) -> None:

@@ -1,0 +1,231 @@
+"""The server's protocol on real loopback sockets (no browser): login, origin, validation,
+deadman, rate limits, places, and the visitor's spoken question through ffmpeg and STT."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+import time
+from typing import Any
+
+import httpx
+import pytest
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.sync.client import connect
+
+from sage_robot.core import topics
+from sage_robot.core.msgs import Twist
+
+WAIT_S = 5.0
+
+
+@pytest.fixture(scope="module")
+def client(robot: Any) -> httpx.Client:
+    return httpx.Client(base_url=robot.url, timeout=30.0)
+
+
+@pytest.fixture(scope="module")
+def cookie(robot: Any) -> str:
+    resp = httpx.post(f"{robot.url}/api/login", json={"password": robot.password})
+    assert resp.status_code == 200
+    return f"sage_session={resp.cookies['sage_session']}"
+
+
+@pytest.fixture(scope="module")
+def cmd_log(robot: Any) -> list[tuple[float, Twist]]:
+    """Every /cmd_vel with the wall time it was published."""
+    log: list[tuple[float, Twist]] = []
+    def record(msg: Twist) -> None:
+        log.append((time.monotonic(), msg))
+
+    robot.call(lambda: robot.bus.subscribe(topics.CMD_VEL, Twist, record))
+    return log
+
+
+def ws_url(robot: Any, path: str) -> str:
+    return robot.url.replace("http://", "ws://") + path
+
+
+def teleop_ws(robot: Any, cookie: str, origin: str | None = None) -> Any:
+    url, headers = ws_url(robot, "/ws/teleop"), {"Cookie": cookie}
+    if origin:
+        return connect(url, origin=origin, additional_headers=headers, open_timeout=WAIT_S)
+    return connect(url, additional_headers=headers, open_timeout=WAIT_S)
+
+
+def recv_json(ws: Any, kind: str, timeout: float = WAIT_S) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout
+    while True:
+        msg = json.loads(ws.recv(timeout=max(0.01, deadline - time.monotonic())))
+        if msg.get("type") == kind:
+            return msg  # type: ignore[no-any-return]
+
+
+def test_control_sockets_and_operator_api_refuse_without_login(robot: Any, client: httpx.Client) -> None:
+    for path in ("/ws/teleop", "/ws/live", "/ws/camera"):
+        with pytest.raises(InvalidStatus) as err:
+            connect(ws_url(robot, path), open_timeout=WAIT_S)
+        assert err.value.response.status_code == 403, path
+    for method, path in (("POST", "/api/goal"), ("GET", "/api/places"), ("GET", "/api/admin/logs"),
+                         ("POST", "/api/admin/places"), ("GET", "/api/map.png")):  # fmt: skip
+        resp = client.request(method, path, json={})
+        assert resp.status_code == 401, path
+        assert "log in" in resp.json()["error"]
+    assert client.get("/teleop", follow_redirects=False).status_code == 303
+
+
+def test_foreign_origin_is_refused_even_with_login(robot: Any, cookie: str) -> None:
+    with pytest.raises(InvalidStatus):
+        teleop_ws(robot, cookie, origin="http://evil.example")
+    with pytest.raises(InvalidStatus):
+        connect(ws_url(robot, "/ws/status"), origin="http://evil.example", open_timeout=WAIT_S)
+    own = robot.url  # the page's own origin is fine
+    with connect(ws_url(robot, "/ws/status"), origin=own, open_timeout=WAIT_S) as ws:
+        assert recv_json(ws, "estop")["engaged"] is False
+
+
+def test_bad_messages_get_an_error_and_the_socket_survives(robot: Any, cookie: str) -> None:
+    bad = {
+        "not json": "not valid JSON",
+        "[1, 2]": '"type"',
+        '{"type": "control", "x": "fast"}': "'x' must be a number",
+        '{"type": "control", "x": NaN}': "finite",
+        '{"type": "control", "z": true}': "'z' must be a number",
+        '{"type": "warp"}': "unknown message type",
+        '{"type": "estop", "engaged": "yes"}': "true or false",
+    }
+    with teleop_ws(robot, cookie) as ws:
+        for text, expected in bad.items():
+            ws.send(text)
+            reply = recv_json(ws, "error")
+            assert expected in reply["error"], (text, reply)
+        ws.send(b"\x00\x01binary")
+        assert "JSON text" in recv_json(ws, "error")["error"]
+        ws.send(json.dumps({"type": "ping", "t": 1}))
+        assert recv_json(ws, "pong")["t"] == 1
+    assert robot.web_node().teleop.command == (0.0, 0.0)
+
+
+def test_oversized_message_closes_only_that_socket(robot: Any, cookie: str) -> None:
+    with connect(ws_url(robot, "/ws/status"), open_timeout=WAIT_S) as ws:
+        ws.send("x" * 100_000)
+        with pytest.raises(ConnectionClosed):
+            for _ in range(20):
+                ws.recv(timeout=WAIT_S)
+    with connect(ws_url(robot, "/ws/status"), open_timeout=WAIT_S) as ws:
+        assert recv_json(ws, "estop")
+
+
+def test_deadman_stops_a_silent_operator(robot: Any, cookie: str, cmd_log: list[tuple[float, Twist]]) -> None:
+    teleop = robot.web_node().teleop
+    before = teleop.counts["deadman_stops"]
+    deadman_s = robot.ctx.settings.web.deadman_s
+    with teleop_ws(robot, cookie) as ws:
+        ws.send(json.dumps({"type": "control", "x": 0.3, "z": 0.0}))
+        deadline = time.monotonic() + WAIT_S
+        while time.monotonic() < deadline and teleop.counts["deadman_stops"] == before:
+            time.sleep(0.02)
+        assert teleop.counts["deadman_stops"] == before + 1
+        sent = [t for t, m in cmd_log if m.linear_x == 0.3]
+        stop = [t for t, m in cmd_log if m.is_zero and sent and t > sent[-1]]
+        assert sent and stop, "a command and then a stop on /cmd_vel"
+        assert deadman_s <= stop[0] - sent[-1] < deadman_s + 0.3
+        msg = recv_json(ws, "deadman")  # the page is told why the robot stopped
+        assert "stopped" in msg["message"]
+    assert teleop.command == (0.0, 0.0)
+
+
+def test_commands_are_clamped_to_the_robot_limits(
+    robot: Any, cookie: str, cmd_log: list[tuple[float, Twist]]
+) -> None:
+    limits = robot.ctx.settings.robot
+    with teleop_ws(robot, cookie) as ws:
+        ws.send(json.dumps({"type": "control", "x": 50.0, "z": -9.0}))
+        ws.send(json.dumps({"type": "ping"}))
+        recv_json(ws, "pong")
+        ws.send(json.dumps({"type": "control", "x": 0, "z": 0}))
+        ws.send(json.dumps({"type": "ping"}))
+        recv_json(ws, "pong")
+    fast = [m for _, m in cmd_log if m.linear_x > 0.5]
+    assert fast and fast[-1] == Twist(limits.max_linear_mps, -limits.max_angular_radps)
+
+
+def test_goal_and_pose_requests_are_validated(robot: Any, client: httpx.Client, cookie: str) -> None:
+    h = {"Cookie": cookie}
+    for body, expected in (({"x": "a", "y": 1}, "x: expected a finite number"),
+                           ({"x": 1}, "y: expected a finite number"),
+                           ({"x": 1e9, "y": 0}, "out of range"),
+                           ({"place": ""}, "place")):  # fmt: skip
+        resp = client.post("/api/goal", json=body, headers=h)
+        assert resp.status_code == 422 and expected in resp.json()["error"], (body, resp.text)
+    resp = client.post("/api/goal", content=b"{not json", headers={**h, "Content-Type": "application/json"})
+    assert resp.status_code == 400 and "JSON" in resp.json()["error"]
+    robot.run(robot.web_node().teleop.set_estop(True, "test"))
+    try:
+        resp = client.post("/api/goal", json={"x": 1.0, "y": 1.0}, headers=h)
+        assert resp.status_code == 409 and "e-stop" in resp.json()["error"]
+    finally:
+        robot.run(robot.web_node().teleop.set_estop(False, "test"))
+    resp = client.post("/api/initial_pose", json={"x": 47.3, "y": 57.5, "theta": math.pi / 2}, headers=h)
+    assert resp.status_code == 200
+
+
+def test_admin_places_are_validated_and_written(robot: Any, client: httpx.Client, cookie: str) -> None:
+    h = {"Cookie": cookie}
+    resp = client.post("/api/admin/places", json={"name": "lower case", "x": 1, "y": 1}, headers=h)
+    assert resp.status_code == 422 and "name" in resp.json()["error"]
+    resp = client.post("/api/admin/places", json={"name": "NOWHERE", "x": -500, "y": -500}, headers=h)
+    assert resp.status_code == 422 and "outside the map" in resp.json()["error"]
+    resp = client.post("/api/admin/places", json={"name": "HERE_NOW", "at_robot": True, "aliases": ["here"]},
+                       headers=h)  # fmt: skip
+    assert resp.status_code == 200, resp.text
+    assert "HERE_NOW" in (robot.tmp / "waypoints.yaml").read_text()
+    resp = client.post("/api/admin/places", json={"name": "HERE_NOW", "at_robot": True}, headers=h)
+    assert resp.status_code == 409
+    logs = client.get("/api/admin/logs?limit=50", headers=h).json()["records"]
+    assert any(r["msg"] == "place added" for r in logs)
+    assert client.get("/api/admin/logs?limit=0", headers=h).status_code == 422
+
+
+def test_health_hides_errors_from_visitors(client: httpx.Client, cookie: str) -> None:
+    public = client.get("/api/health").json()
+    assert public["nodes"]["web"]["state"] == "running"
+    assert "last_error" not in public["nodes"]["web"]
+    assert "last_error" in client.get("/api/health", headers={"Cookie": cookie}).json()["nodes"]["web"]
+
+
+def test_login_attempts_are_rate_limited(robot: Any) -> None:
+    codes = [httpx.post(f"{robot.url}/api/login", json={"password": "guess"}).status_code for _ in range(8)]
+    assert codes[0] == 401 and 429 in codes
+
+
+def test_visitor_audio_goes_through_ffmpeg_and_speech_to_text(robot: Any, client: httpx.Client) -> None:
+    """A spoken question (TTS -> WebM/Opus as a browser records it) -> transcript -> reply."""
+    tts = pytest.importorskip("sage_robot.voice.tts")
+    if shutil.which("ffmpeg") is None:
+        pytest.fail("ffmpeg is missing (apt-get install ffmpeg)")
+    resp = client.post("/api/talk/audio", files={"audio": ("x.webm", b"not audio at all", "audio/webm")})
+    assert resp.status_code == 422 and "ffmpeg" in resp.json()["error"]
+    from sage_robot.voice.audio_io import wav_bytes
+
+    pcm, rate = tts.synthesize("Where is the clean room?")
+    webm = subprocess.run(
+        ["ffmpeg", "-loglevel", "error", "-i", "pipe:0", "-c:a", "libopus", "-f", "webm", "pipe:1"],
+        input=wav_bytes(pcm, rate), capture_output=True, check=True, timeout=30,
+    ).stdout  # fmt: skip
+    resp = client.post("/api/talk/audio", files={"audio": ("speech.webm", webm, "audio/webm")})
+    assert resp.status_code == 200, resp.text
+    body = resp.json()
+    assert "clean room" in body["transcript"].lower()
+    assert body["transcript"] in robot.questions
+    assert "first floor" in body["reply"]
+
+
+def test_visitor_questions_are_rate_limited(client: httpx.Client) -> None:
+    codes = [client.post("/api/talk/text", json={"text": f"question {i}"}).status_code for i in range(12)]
+    assert 429 in codes
+    limited = client.post("/api/talk/text", json={"text": "one more"})
+    assert limited.status_code == 429 and "Retry-After" in limited.headers
+    assert "too many" in limited.json()["error"]
