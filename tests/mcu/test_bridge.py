@@ -14,7 +14,8 @@ from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import node_class
 from sage_robot.app.runtime import make_context, run_launcher
 from sage_robot.core.config import load_profile
-from sage_robot.core.msgs import Level
+from sage_robot.core import topics
+from sage_robot.core.msgs import Event, Level
 from sage_robot.hardware.mcu import protocol as proto
 from sage_robot.sim.firmware import EncoderFaults
 
@@ -169,6 +170,8 @@ async def test_bad_frames_on_the_wire_are_counted_and_dropped(rig: Rig):
 
 async def test_unplug_and_replug_are_survived(rig: Rig, caplog: pytest.LogCaptureFixture):
     caplog.set_level(logging.INFO, logger="sage.serial_bridge")
+    events: list[Event] = []
+    rig.ctx.bus.subscribe(topics.EVENTS, Event, events.append)
     rig.command(0.3)
     await rig.run(0.5)
     rig.sim.pty.unplug()
@@ -192,6 +195,7 @@ async def test_unplug_and_replug_are_survived(rig: Rig, caplog: pytest.LogCaptur
     stats = rig.bridge.stats()
     assert stats["connected"] and stats["reconnects"] == 1 and stats["disconnects"] == 1
     assert rig.status[-1].level is Level.OK
+    assert [e.kind for e in events] == ["mcu_disconnected", "mcu_reconnected"]
 
 
 async def test_tilted_dead_wheel_shows_the_documented_drift(rig: Rig):

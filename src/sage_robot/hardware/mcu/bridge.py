@@ -24,6 +24,7 @@ from sage_robot.core.errors import DeviceNotConnectedError
 from sage_robot.core.msgs import (
     BatteryState,
     DiagnosticStatus,
+    Event,
     Imu,
     Level,
     Odometry,
@@ -150,6 +151,8 @@ class SerialBridgeNode(Node):
         )
         self._rx_thread.start()
         self.log.info("MCU link up", port=path, baud=self.mcu.baud)
+        if self.counters["reconnects"]:
+            self._event("mcu_reconnected", f"MCU link back on {path}")
         self._write(*self.command)
         self._publish_status()
 
@@ -172,7 +175,11 @@ class SerialBridgeNode(Node):
             reason=reason,
             every_s=self.mcu.reconnect_s,
         )
+        self._event("mcu_disconnected", f"MCU link lost: {reason}")
         self._publish_status()
+
+    def _event(self, kind: str, message: str) -> None:
+        self.bus.publish(topics.EVENTS, Event(self.clock.now(), self.name, kind, message))
 
     def _close_port(self) -> None:
         self._rx_stop.set()
