@@ -1,5 +1,5 @@
 """End to end over a real pseudo-terminal: the serial bridge node <-> the firmware model,
-on the simulated clock (conftest.Rig)."""
+on the simulated clock (tests/mcu/rig.py)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from sage_robot.app.launcher import NodeSpec
 from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import node_class
 from sage_robot.app.runtime import make_context, run_launcher
-from sage_robot.core.config import load_profile
 from sage_robot.core import topics
+from sage_robot.core.config import load_profile
 from sage_robot.core.msgs import Event, Level
 from sage_robot.hardware.mcu import protocol as proto
 from sage_robot.sim.firmware import EncoderFaults
