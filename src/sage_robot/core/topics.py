@@ -40,5 +40,8 @@ CONVERSE = "converse"  # action: Text (what the visitor said) -> feedback Text (
 #   to speak, as it streams) -> result Text (the whole reply). Served by the brain.
 HEARD = "/sage/heard"  # Text: final transcript of a visitor turn (voice -> anyone)
 LOC_HEALTH = "/localization/health"  # nav.LocalizationHealth
+AUDIO_OUT = "/sage/audio_out"  # voice.AudioChunk: the robot's speech, for the web pages
+TURN_LATENCY = "/sage/voice/latency"  # voice.TurnLatency: per-turn latency breakdown
+SIM_VISITOR_SAY = "/sim/visitor_say"  # Text: a simulated visitor speaks it into the sim mic
 SIM_SPEAKER_BEARING = "/sim/speaker_bearing"  # voice.Doa: simulated visitor's bearing (truth)
 SIM_SPEAKER = "/sim/speaker"  # sim.SpeakerBearing: nearest person within 3 m (or none), with distance

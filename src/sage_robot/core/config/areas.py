@@ -40,18 +40,40 @@ class NavSettings(Section):
 
 
 class VoiceSettings(Section):
+    """The voice pipeline (wake word, VAD, STT, TTS, DOA). Times in seconds."""
+
     enabled: bool = Field(True, description="Run the voice pipeline.")
+    source: str = Field(
+        "auto", description="'auto' (sim mic in simulation, else the real mic), 'mic' or 'sim'."
+    )
     wake_models: tuple[str, ...] = Field(
-        ("hey_jarvis", "alexa"), description="Names or .onnx paths."
+        ("hey_jarvis", "alexa"), description="Bundled names or .onnx paths (several at once)."
     )
     wake_threshold: float = Field(0.6, ge=0, le=1, description="Wake-word score threshold.")
+    wake_refractory_s: float = Field(
+        2.0, ge=0, description="After a detection, ignore the same model for this long (s)."
+    )
     vad_threshold: float = Field(0.6, ge=0, le=1, description="Speech probability threshold.")
-    stt_model: str = Field("tiny.en", description="Whisper model name or path.")
+    vad_silence_s: float = Field(0.7, gt=0, description="Silence that ends an utterance (s).")
+    vad_preroll_s: float = Field(0.4, ge=0, description="Audio kept before speech starts (s).")
+    max_utterance_s: float = Field(15.0, gt=0, description="Longest utterance recorded (s).")
+    no_speech_timeout_s: float = Field(
+        5.0, gt=0, description="After the wake word, give up if nobody speaks for (s)."
+    )
+    follow_up_s: float = Field(
+        4.0, ge=0, description="After a reply, listen this long without a wake word (s)."
+    )
+    stt_model: str = Field("tiny.en", description="Whisper model: 'tiny.en' (bundled) or a path.")
     stt_device: str = Field("cpu", description="'cpu' or 'cuda'.")
     stt_compute_type: str = Field("int8", description="CTranslate2 compute type.")
+    tts_engine: str = Field("piper", description="'piper' (GPL extra) or 'espeak' (espeak-ng).")
     tts_voice: str = Field("en_US-joe-medium", description="Piper voice name or .onnx path.")
+    tts_deterministic: bool = Field(False, description="No synthesis noise (tests, benchmarks).")
     mic_device: str = Field("", description="Input device name; empty = default.")
+    mic_channel: int = Field(0, ge=0, description="Input channel (the XVF3800's processed beam).")
     speaker_device: str = Field("", description="Output device name; empty = default.")
+    brain_timeout_s: float = Field(30.0, gt=0, description="Longest wait for the brain's reply (s).")
+    doa_hz: float = Field(12.5, gt=0, description="DOA broadcast rate (Hz).")
 
 
 class LlmSettings(Section):

@@ -1,0 +1,162 @@
+"""``VoiceNode``: the voice pipeline and the DOA broadcast as one node.
+
+Source of audio (``voice.source``): ``auto`` uses the simulated microphone and speaker on a
+simulated clock, the real ones (PortAudio) otherwise. Models load in a worker thread.
+Without the voice extras the node still runs: it publishes the DOA and a face state whose
+``error_msg`` says what to install.
+
+Topics: publishes ``/sage/ui_state``, ``/doa`` (~12.5 Hz), ``/sage/heard``,
+``/sage/audio_out``, ``/sage/voice/latency``; subscribes ``/sage/say``; in simulation
+also ``/sim/speaker`` (sim.SpeakerBearing: the nearest person) and ``/sim/visitor_say`` (Text
+a simulated visitor says into the microphone, rendered with the robot's TTS).
+"""
+
+from __future__ import annotations
+
+import asyncio
+from dataclasses import dataclass
+from typing import Any
+
+from sage_robot.core.clock import Clock
+from sage_robot.core.config.areas import VoiceSettings
+from sage_robot.core.errors import ConfigError, DeviceNotConnectedError
+from sage_robot.core.msgs import Text
+from sage_robot.core.msgs.sim import SpeakerBearing
+from sage_robot.core.msgs.voice import Doa, Phase, UiState
+from sage_robot.core.node import Node
+from sage_robot.core.topics import DOA, SIM_SPEAKER, SIM_VISITOR_SAY, UI_STATE
+from sage_robot.hardware.doa import FRONT_DEG, XVF3800Doa
+from sage_robot.voice.audio_io import SAMPLE_RATE, resample
+from sage_robot.voice.pipeline import VoicePipeline
+from sage_robot.voice.player import Mouth
+from sage_robot.voice.stt import SpeechToText
+from sage_robot.voice.tts import Speech, make_engine
+from sage_robot.voice.vad import SileroVad
+from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
+
+SIM_OUT_DIR_KEY = "voice_sim_out_dir"  # ctx.resources: where the sim speaker writes WAV files
+SIM_AUDIO_KEY = "voice_sim_audio"  # ctx.resources: (SimMicrophone, SimSpeaker) once set up
+
+
+@dataclass
+class VoiceModels:
+    """Everything heavy, loaded once: wake engines (microphone and self-hearing), VAD, STT, TTS."""
+
+    wake: OpenWakeWordEngine
+    wake_self: OpenWakeWordEngine
+    vad: SileroVad
+    stt: SpeechToText
+    speech: Speech
+
+    @classmethod
+    def load(cls, s: VoiceSettings) -> VoiceModels:
+        return cls(
+            wake=OpenWakeWordEngine(s.wake_models),
+            wake_self=OpenWakeWordEngine(s.wake_models),
+            vad=SileroVad(),
+            stt=SpeechToText(s.stt_model, s.stt_device, s.stt_compute_type),
+            speech=Speech(make_engine(s.tts_engine, s.tts_voice, s.tts_deterministic)),
+        )
+
+
+def build_pipeline(
+    bus: Any, clock: Clock, s: VoiceSettings, models: VoiceModels, mic: Any, speaker: Any
+) -> VoicePipeline:
+    """Wire models, microphone and speaker into a pipeline (also used by tests and bench)."""
+    models.wake.reset()
+    models.wake_self.reset()
+    mouth = Mouth(bus, clock, models.speech, speaker,
+                  reference=WakeDetector(models.wake_self, s.wake_threshold, s.wake_refractory_s))
+    wake = WakeDetector(models.wake, s.wake_threshold, s.wake_refractory_s)  # fmt: skip
+    return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt)
+
+
+class VoiceNode(Node):
+    name = "voice"
+
+    async def setup(self) -> None:
+        self.vs: VoiceSettings = self.settings.voice
+        self.pipeline: VoicePipeline | None = None
+        self.doa_angle = FRONT_DEG
+        self.doa_source = "fixed"
+        self._xvf: XVF3800Doa | None = None
+        self._mic: Any = None
+        self._speaker: Any = None
+        self.simulated = self.vs.source == "sim" or (
+            self.vs.source == "auto" and self.clock.is_simulated
+        )
+        await self._setup_doa()
+        self.every(1.0 / self.vs.doa_hz, self._publish_doa, name="voice.doa")
+        if not self.vs.enabled:
+            self.log.info("voice disabled in the profile")
+            return
+        try:
+            models = await asyncio.to_thread(VoiceModels.load, self.vs)
+            self._open_audio(models)
+        except (ConfigError, DeviceNotConnectedError) as exc:
+            self.log.error("voice pipeline unavailable", error=str(exc))
+            self.bus.publish(UI_STATE, UiState(Phase.ERROR, error_msg=f"voice: {exc}"))
+            return
+        self.pipeline = build_pipeline(self.bus, self.clock, self.vs, models, self._mic,
+                                       self._speaker)  # fmt: skip
+        self.models = models
+        self.spawn(self.pipeline.run(), name="voice.pipeline")
+        if self.simulated:
+            self.subscribe(SIM_VISITOR_SAY, Text, self._visitor_says)
+        self.log.info("voice ready", source="sim" if self.simulated else "mic",
+                      wake=",".join(self.vs.wake_models), tts=self.vs.tts_engine)  # fmt: skip
+
+    def _open_audio(self, models: VoiceModels) -> None:
+        if self.simulated:
+            from sage_robot.sim.audio import SimMicrophone, SimSpeaker
+
+            self._mic = SimMicrophone(self.clock, seed=self.settings.sim.seed)
+            self._speaker = SimSpeaker(self.clock, self._mic, self.ctx.resources.get(SIM_OUT_DIR_KEY))
+            self.ctx.resources[SIM_AUDIO_KEY] = (self._mic, self._speaker)
+        else:
+            from sage_robot.hardware.audio import SoundDeviceMicrophone, SoundDeviceSpeaker
+
+            self._mic = SoundDeviceMicrophone(self.vs.mic_device, self.vs.mic_channel)
+            self._speaker = SoundDeviceSpeaker(self.vs.speaker_device)
+
+    async def _setup_doa(self) -> None:
+        if self.simulated:
+            self.doa_source = "sim"
+            self.subscribe(SIM_SPEAKER, SpeakerBearing, self._on_bearing)
+            return
+        xvf = XVF3800Doa()
+        try:
+            await asyncio.to_thread(xvf.open)
+            self._xvf, self.doa_source = xvf, xvf.source
+        except DeviceNotConnectedError as exc:
+            self.log.warning("no DOA device; the face looks straight ahead", reason=str(exc))
+
+    def _on_bearing(self, msg: SpeakerBearing) -> None:
+        """The simulator's nearest person (seed convention); nobody near: look ahead."""
+        self.doa_angle = msg.angle_deg % 360.0 if msg.present else FRONT_DEG
+
+    async def _publish_doa(self) -> None:
+        if self._xvf is not None:
+            try:
+                self.doa_angle = await asyncio.to_thread(self._xvf.read_deg)
+            except DeviceNotConnectedError as exc:
+                self.log.warning("DOA device lost", reason=str(exc))
+                self._xvf, self.doa_source, self.doa_angle = None, "fixed", FRONT_DEG
+        self.bus.publish(DOA, Doa(self.clock.now(), self.doa_angle, self.doa_source))
+
+    async def _visitor_says(self, msg: Text) -> None:
+        """Simulation: render ``msg`` with the robot's TTS and speak it into the sim mic."""
+        speech = self.models.speech
+        pcm = await asyncio.to_thread(speech.synthesize, msg.data)
+        self._mic.inject(resample(pcm, speech.sample_rate, SAMPLE_RATE))
+
+    async def teardown(self) -> None:
+        for dev in (self._mic, self._speaker, self._xvf):
+            if dev is not None:
+                dev.close()
+
+    def stats(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"doa_source": self.doa_source}
+        if self.pipeline is not None:
+            out.update(self.pipeline.stats())
+        return out

