@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 import yaml
-from nav_raycast import RANGE_MAX_M, RANGE_MIN_M, beam_angles, cast
+from .nav_raycast import RANGE_MAX_M, RANGE_MIN_M, beam_angles, cast
 from scipy import ndimage
 
 from sage_robot.core import topics

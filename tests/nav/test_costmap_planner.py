@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from nav_grids import draw, room
+from .nav_grids import draw, room
 
 from sage_robot.core.mapio import read_map
 from sage_robot.nav.costmap import INSCRIBED, LETHAL, MAX_NON_OBSTACLE, NO_INFORMATION, Costmap, inflate

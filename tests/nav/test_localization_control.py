@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from nav_grids import draw
-from nav_raycast import RANGE_MAX_M, beam_angles, cast
+from .nav_grids import draw
+from .nav_raycast import RANGE_MAX_M, beam_angles, cast
 
 from sage_robot.core.geometry import wrap_angle
 from sage_robot.nav.amcl import ParticleFilter, kld_count, sample_odometry, scan_fit

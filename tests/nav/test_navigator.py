@@ -5,8 +5,8 @@ from __future__ import annotations
 import asyncio
 import math
 
-from nav_grids import draw
-from nav_sim import running, settings_for, wait_until, write_building
+from .nav_grids import draw
+from .nav_sim import running, settings_for, wait_until, write_building
 
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalStatus

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from simgrids import grid_from_art
+from .simgrids import grid_from_art
 
 from sage_robot.core.msgs import OccupancyGrid, Pose2D
 from sage_robot.sim import raycast

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 from PIL import Image
-from simgrids import grid_from_art
+from .simgrids import grid_from_art
 
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs.sim import LowObstacle
