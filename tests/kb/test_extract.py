@@ -5,10 +5,10 @@ from __future__ import annotations
 import itertools
 
 import pytest
-from kb_docs import DOCX_SECTIONS, HTML, MARKDOWN, PDF_PAGES, TEXT, make_docx, make_pdf
 
 from sage_robot.kb.chunk import chunk_blocks
 from sage_robot.kb.extract import IngestError, extract
+from tests.kb.kb_docs import DOCX_SECTIONS, HTML, MARKDOWN, PDF_PAGES, TEXT, make_docx, make_pdf
 
 
 def test_markdown_keeps_heading_paths():

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
-from kb_docs import DOCX_SECTIONS, HTML, MARKDOWN, PDF_PAGES, TEXT, make_docx, make_pdf
 
 from sage_robot.kb.service import SearchError
+from tests.kb.kb_docs import DOCX_SECTIONS, HTML, MARKDOWN, PDF_PAGES, TEXT, make_docx, make_pdf
 
 
 @pytest.fixture
