@@ -12,6 +12,7 @@ BENCHMARKS: dict[str, str] = {
     "kb": "sage_robot.bench.kb",
     "mcu": "sage_robot.bench.mcu",
     "brain": "sage_robot.bench.brain",
+    "web": "sage_robot.bench.web",
 }
 
 

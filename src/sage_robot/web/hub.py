@@ -50,7 +50,7 @@ MIN_INTERVAL_S: dict[str, float] = {
     "estop": 0.0,
     "teleop": 0.0,
     "nav": 0.2,
-    "camera": 1.0 / 15.0,  # frames/s cap per client
+    "camera": 1.0 / 15.0,  # frames/s cap per client; web.camera_fps overrides
 }
 EVENTS_KEPT = 50  # recent events shown on a newly opened page
 AMCL_FRESH_S = 2.0  # prefer the AMCL pose over odometry while it is this recent (clock s)
@@ -92,6 +92,7 @@ class Hub:
         mount = self.settings.robot.lidar
         self.lidar_mount = (mount.x_m, mount.y_m, mount.yaw_rad)
         self.estop = False
+        self.intervals = dict(MIN_INTERVAL_S, camera=1.0 / self.settings.web.camera_fps)
         self.counts = {"frames_in": 0, "events_in": 0}
 
     def start(self) -> None:
@@ -141,7 +142,7 @@ class Hub:
             camera = False
             wait_s: float | None = None
             for ch in sorted(listener.dirty):
-                due = listener.last_sent.get(ch, 0.0) + MIN_INTERVAL_S.get(ch, 0.0)
+                due = listener.last_sent.get(ch, 0.0) + self.intervals.get(ch, 0.0)
                 if due > now:
                     wait_s = min(wait_s or 1e9, due - now)
                     continue
