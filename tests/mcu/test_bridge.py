@@ -175,7 +175,7 @@ async def test_unplug_and_replug_are_survived(rig: Rig, caplog: pytest.LogCaptur
     rig.command(0.3)
     await rig.run(0.5)
     rig.sim.pty.unplug()
-    await rig.until(lambda: not rig.bridge.connected, 1.0)
+    await rig.until(lambda: not rig.bridge.connected, 3.0)
     await rig.run(2.0, real_sleep_s=0.0005)  # several reopen attempts, all failing
     lost = [r for r in caplog.records if "link lost" in r.getMessage()]
     assert len(lost) == 1 and lost[0].levelno == logging.WARNING  # one clear line
