@@ -38,5 +38,12 @@ PROFILES: dict[str, list[tuple[str, bool]]] = {
         ("brain", False),
     ],
     # The real robot building a map (the seed's slam_robot.sh).
-    "slam": [("heartbeat", False), ("foxglove", False), ("lidar", False), ("camera", False), ("web", True)],
+    "slam": [("heartbeat", False), ("foxglove", False), ("lidar", False), ("camera", False), ("web", True),
+             ("serial_bridge", True), ("slam", False)],
 }
+
+# SLAM in the simulator (`sage slam`): the "sim" profile as it stands when this module is
+# imported, without localization, navigator and map server, plus the SLAM node.
+PROFILES["sim_slam"] = [
+    entry for entry in PROFILES["sim"] if entry[0] not in ("localization", "navigator", "map_server")
+] + [("slam", False)]

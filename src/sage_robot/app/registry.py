@@ -25,6 +25,7 @@ NODES: dict[str, str] = {
     "serial_bridge": "sage_robot.hardware.mcu.bridge:SerialBridgeNode",
     "web": "sage_robot.web.node:WebNode",
     "brain": "sage_robot.brain.node:BrainNode",
+    "slam": "sage_robot.nav.slam.node:SlamNode",
 }
 
 # Which extra provides a node's module, for the message when its import fails.

@@ -13,6 +13,7 @@ BENCHMARKS: dict[str, str] = {
     "mcu": "sage_robot.bench.mcu",
     "brain": "sage_robot.bench.brain",
     "web": "sage_robot.bench.web",
+    "slam": "sage_robot.bench.slam",
 }
 
 

@@ -1,0 +1,258 @@
+"""Online graph SLAM: scan-to-local-map matching, keyframes, loop closures, pose-graph optimisation.
+
+For each scan (robot-frame ranges + the odometry pose it was taken at):
+
+1. predict the pose from the odometry increment since the previous scan;
+2. match the scan against a local map made of the last ``local_keyframes`` keyframes: a
+   correlative search around the prediction, then point-to-line ICP (:mod:`matcher`);
+3. when the robot has moved ``keyframe_dist_m`` or turned ``keyframe_angle_rad`` since the
+   last keyframe, the scan becomes a keyframe: a pose-graph node with a scan-match edge and a
+   (weak) odometry edge to the previous keyframe;
+4. a new keyframe near an old part of the trajectory (within ``loop_radius_m``, at least
+   ``loop_min_travel_m`` of travel ago) is matched against a submap of the old keyframes with a
+   wide correlative search; a match whose score and inlier fraction pass the thresholds
+   becomes a loop-closure edge, and the graph is optimised (:mod:`posegraph`).
+
+Every scan's pose is kept relative to its keyframe, so the whole trajectory follows the
+optimised keyframes. Poses are (x, y m; theta rad) in the map frame, whose origin is the
+first scan's pose (``initial_pose``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sage_robot.core.geometry import compose, relative
+from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap
+from sage_robot.nav.slam.points import Pose, Scan, transform, voxel_filter
+from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, PoseGraph
+
+MIN_SCAN_POINTS = 20  # a scan with fewer hits is dead-reckoned
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    max_range_m: float = 30.0  # hits beyond this are ignored (and cleared only this far)
+    scan_voxel_m: float = 0.05  # scan points used for matching: one per cell of this size
+    map_voxel_m: float = 0.03  # local map point spacing
+    keyframe_dist_m: float = 0.3  # a new keyframe after this much travel...
+    keyframe_angle_rad: float = 0.2  # ...or this much turning
+    local_keyframes: int = 25  # keyframes in the local map
+    search_xy_m: float = 0.25  # correlative search window around the prediction (±)
+    search_theta_rad: float = 0.12  # (±)
+    search_theta_step_rad: float = 0.01
+    min_track_inliers: float = 0.3  # below this the match is not trusted: dead-reckon
+    prior_sigma_xy_m: float = 0.3  # pull of the odometry prediction in ICP (weak)
+    prior_sigma_theta_rad: float = 0.2
+    odom_sigma_xy_m: float = 0.05  # odometry edge noise: base + fraction of the motion
+    odom_sigma_theta_rad: float = 0.03
+    odom_sigma_fraction: float = 0.2
+    loop_radius_m: float = 6.0  # candidates within this distance of the new keyframe
+    loop_min_travel_m: float = 12.0  # ...and at least this far back along the trajectory
+    loop_search_xy_m: float = 2.0  # loop-closure correlative window (±)
+    loop_search_theta_rad: float = 0.35
+    loop_search_theta_step_rad: float = 0.015
+    loop_submap_keyframes: int = 12  # old keyframes each side of the candidate in its submap
+    loop_min_score: float = 0.55  # mean likelihood a loop closure needs
+    loop_min_inliers: float = 0.65  # fraction of points within inlier_m a loop closure needs
+    loop_information_scale: float = 0.5  # a loop edge counts this much of a scan-match edge
+    loop_every_keyframes: int = 2  # try a loop closure every this many keyframes
+    match: MatchConfig = field(default_factory=MatchConfig)
+
+
+@dataclass
+class Keyframe:
+    stamp: float
+    odom: Pose
+    scan: Scan
+    points: np.ndarray  # robot frame, map_voxel_m filtered
+    travel_m: float  # trajectory length up to here
+
+
+@dataclass(frozen=True)
+class StepResult:
+    pose: Pose
+    score: float
+    inliers: float
+    keyframe: bool
+    loop_closed: bool
+
+
+@dataclass
+class _TrajectoryEntry:
+    stamp: float
+    keyframe: int
+    offset: Pose  # pose relative to the keyframe
+
+
+class Slam:
+    def __init__(self, config: SlamConfig | None = None, initial_pose: Pose = (0.0, 0.0, 0.0)) -> None:
+        self.config = config or SlamConfig()
+        self.initial_pose = initial_pose
+        self.graph = PoseGraph()
+        self.keyframes: list[Keyframe] = []
+        self.trajectory: list[_TrajectoryEntry] = []
+        self.pose: Pose = initial_pose
+        self.last_score = 0.0
+        self.loop_attempts = 0
+        self.optimizations = 0
+        self.map_version = 0  # bumps when keyframe poses change (after an optimisation)
+        self._last_odom: Pose | None = None
+        self._local: PointMap | None = None
+        self._since_loop_try = 0
+
+    # ------------------------------------------------------------------ per scan
+    def add_scan(self, stamp: float, odom: Pose, scan: Scan) -> StepResult:
+        cfg = self.config
+        q = voxel_filter(scan.points(cfg.max_range_m), cfg.scan_voxel_m)
+        if self._last_odom is None and self.keyframes:  # a resumed session: start at its last keyframe
+            self._last_odom = odom
+        if self._last_odom is None:
+            self._last_odom = odom
+            self._add_keyframe(stamp, odom, scan, self.initial_pose, None)
+            self.trajectory.append(_TrajectoryEntry(stamp, 0, (0.0, 0.0, 0.0)))
+            return StepResult(self.pose, 1.0, 1.0, True, False)
+        predicted = compose(self.pose, relative(self._last_odom, odom))
+        self._last_odom = odom
+        match = self._track(q, predicted)
+        if match is None or match.inliers < cfg.min_track_inliers:
+            pose, score, inliers = predicted, 0.0, match.inliers if match else 0.0
+        else:
+            pose, score, inliers = match.pose, match.score, match.inliers
+        self.pose, self.last_score = pose, score
+        kf = len(self.keyframes) - 1
+        last = self.graph.poses[kf]
+        moved = relative(last, pose)
+        if math.hypot(moved[0], moved[1]) < cfg.keyframe_dist_m and abs(moved[2]) < cfg.keyframe_angle_rad:
+            self.trajectory.append(_TrajectoryEntry(stamp, kf, moved))
+            return StepResult(pose, score, inliers, False, False)
+        info = match.information if match is not None and score > 0 else None
+        self._add_keyframe(stamp, odom, scan, pose, info)
+        self.trajectory.append(_TrajectoryEntry(stamp, len(self.keyframes) - 1, (0.0, 0.0, 0.0)))
+        closed = self._try_loop_closure()
+        return StepResult(self.pose, score, inliers, True, closed)
+
+    def _track(self, q: np.ndarray, predicted: Pose) -> Match | None:
+        cfg = self.config
+        if self._local is None or len(q) < MIN_SCAN_POINTS:
+            return None
+        init, _ = self._local.search(
+            q, predicted, cfg.search_xy_m, cfg.search_theta_rad, cfg.search_theta_step_rad
+        )
+        prior_info = np.diag([cfg.prior_sigma_xy_m**-2] * 2 + [cfg.prior_sigma_theta_rad**-2])
+        return self._local.refine(q, init, predicted, prior_info)
+
+    # ------------------------------------------------------------------ keyframes
+    def _add_keyframe(
+        self, stamp: float, odom: Pose, scan: Scan, pose: Pose, info: np.ndarray | None
+    ) -> None:
+        cfg = self.config
+        pts = voxel_filter(scan.points(cfg.max_range_m), cfg.map_voxel_m)
+        travel = 0.0
+        if self.keyframes:
+            prev = self.keyframes[-1]
+            step = relative(prev.odom, odom)
+            travel = prev.travel_m + math.hypot(step[0], step[1])
+        node = self.graph.add_node(pose)
+        self.keyframes.append(Keyframe(stamp, odom, scan, pts, travel))
+        if node > 0:
+            i = node - 1
+            z = relative(self.graph.poses[i], pose)
+            if info is not None:
+                self.graph.add_edge(i, node, z, info, KIND_SCAN)
+            odo = relative(self.keyframes[i].odom, odom)
+            dist = math.hypot(odo[0], odo[1])
+            sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
+            sth = cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * abs(odo[2])
+            self.graph.add_edge(i, node, odo, np.diag([sxy**-2, sxy**-2, sth**-2]), KIND_ODOM)
+        self._rebuild_local()
+
+    def _points_of(self, indices: range | list[int]) -> np.ndarray:
+        chunks = [transform(self.graph.poses[k], self.keyframes[k].points) for k in indices]
+        return voxel_filter(np.concatenate(chunks), self.config.map_voxel_m) if chunks else np.zeros((0, 2))
+
+    def _rebuild_local(self) -> None:
+        n = len(self.keyframes)
+        pts = self._points_of(range(max(0, n - self.config.local_keyframes), n))
+        self._local = (
+            PointMap(pts, self.config.match, self.config.search_xy_m) if len(pts) >= MIN_SCAN_POINTS else None
+        )
+
+    # ------------------------------------------------------------------ loop closure
+    def _loop_candidate(self) -> int | None:
+        cfg = self.config
+        k = len(self.keyframes) - 1
+        here = np.array(self.graph.poses[k][:2])
+        travel = np.array([kf.travel_m for kf in self.keyframes[:k]])
+        old = np.nonzero(travel < self.keyframes[k].travel_m - cfg.loop_min_travel_m)[0]
+        if len(old) == 0:
+            return None
+        xy = np.array([self.graph.poses[j][:2] for j in old])
+        dist = np.hypot(*(xy - here).T)
+        best = int(np.argmin(dist))
+        return int(old[best]) if dist[best] < cfg.loop_radius_m else None
+
+    def _try_loop_closure(self) -> bool:
+        cfg = self.config
+        self._since_loop_try += 1
+        if self._since_loop_try < cfg.loop_every_keyframes:
+            return False
+        j = self._loop_candidate()
+        if j is None:
+            return False
+        self._since_loop_try = 0
+        self.loop_attempts += 1
+        k = len(self.keyframes) - 1
+        h = cfg.loop_submap_keyframes
+        limit = self.keyframes[k].travel_m - cfg.loop_min_travel_m
+        members = [i for i in range(max(0, j - h), min(k, j + h + 1)) if self.keyframes[i].travel_m < limit]
+        sub = PointMap(self._points_of(members), cfg.match, cfg.loop_search_xy_m)
+        q = voxel_filter(self.keyframes[k].points, cfg.scan_voxel_m)
+        guess = self.graph.poses[k]
+        init, score = sub.search(
+            q, guess, cfg.loop_search_xy_m, cfg.loop_search_theta_rad, cfg.loop_search_theta_step_rad
+        )
+        if score < cfg.loop_min_score * 0.8:
+            return False
+        match = sub.refine(q, init)
+        if match.score < cfg.loop_min_score or match.inliers < cfg.loop_min_inliers:
+            return False
+        z = relative(self.graph.poses[j], match.pose)
+        self.graph.add_edge(j, k, z, match.information * cfg.loop_information_scale, KIND_LOOP)
+        self.optimize()
+        return True
+
+    def optimize(self) -> dict[str, float]:
+        """Optimise the pose graph and move the local map and current pose with it."""
+        k = len(self.keyframes) - 1
+        offset = relative(self.graph.poses[k], self.pose)
+        stats = self.graph.optimize()
+        self.optimizations += 1
+        self.map_version += 1
+        self.pose = compose(self.graph.poses[k], offset)
+        self._rebuild_local()
+        return stats
+
+    def resume(self) -> None:
+        """After keyframes and graph were restored: track on from the last keyframe."""
+        if self.keyframes:
+            self.pose = self.graph.poses[-1]
+            self._last_odom = None
+            self._rebuild_local()
+
+    # ------------------------------------------------------------------ results
+    @property
+    def loop_closures(self) -> int:
+        return self.graph.loop_closures
+
+    def keyframe_poses(self) -> list[Pose]:
+        return list(self.graph.poses)
+
+    def trajectory_array(self) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps (N,), poses (N, 3)) of every scan, following the optimised keyframes."""
+        stamps = np.array([e.stamp for e in self.trajectory])
+        poses = np.array([compose(self.graph.poses[e.keyframe], e.offset) for e in self.trajectory])
+        return stamps, poses.reshape(-1, 3)

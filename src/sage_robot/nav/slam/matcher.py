@@ -1,0 +1,218 @@
+"""Scan-to-map matching: a correlative search (coarse-to-fine, vectorised over a precomputed
+likelihood field) followed by point-to-line ICP (Gauss-Newton) against the map's points.
+
+A :class:`PointMap` holds map-frame points (m) with their normals, a KD-tree, and a
+likelihood field: ``L = exp(-d² / 2σ²)`` of the distance ``d`` (m) to the nearest map point,
+on a grid of ``grid_res`` (m) cells, row = y, column = x. A second field holds, per cell,
+the maximum of ``L`` over the ``COARSE`` × ``COARSE`` cells above and to its right: the
+score of one coarse offset bounds the scores of every fine offset inside it, so the search
+looks at fine offsets only inside the best coarse ones (branch and bound of depth two, as
+Olson's real-time correlative scan matching and Cartographer do).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
+
+from sage_robot.nav.slam.points import Pose, normals, transform
+
+COARSE = 4  # fine cells per coarse search step
+MAX_LOOKUPS = 3_000_000  # field look-ups per vectorised batch (memory bound)
+MAX_BRANCHES = 12  # coarse candidates refined at most
+MIN_MATCH_POINTS = 10  # fewer scan points than this: no match
+
+
+@dataclass(frozen=True)
+class MatchConfig:
+    grid_res_m: float = 0.05  # likelihood field cell size
+    sigma_m: float = 0.08  # likelihood fall-off with distance to the nearest map point
+    icp_stages_m: tuple[float, ...] = (0.5, 0.25, 0.12, 0.06)  # association gates, coarse to fine
+    icp_iterations: int = 8  # Gauss-Newton steps per stage
+    huber_m: float = 0.03  # residuals beyond this are down-weighted
+    inlier_m: float = 0.08  # a scan point this close to the map counts as matched
+    point_sigma_m: float = 0.01  # residual noise per point for the match's information
+
+
+@dataclass(frozen=True)
+class Match:
+    pose: Pose  # map frame (m, rad)
+    score: float  # mean likelihood of the scan points, 0..1
+    inliers: float  # fraction of scan points within inlier_m of the map
+    information: np.ndarray  # 3x3, of (x, y, theta), per unit weight of one scan
+
+
+class PointMap:
+    """Map-frame points to match against. ``margin_m`` bounds the search window."""
+
+    def __init__(self, pts: np.ndarray, config: MatchConfig, margin_m: float = 1.0) -> None:
+        self.config = config
+        self.points = pts
+        self.tree = cKDTree(pts)
+        self.normals = normals(pts, self.tree)
+        self.margin_m = margin_m
+        self._field: np.ndarray | None = None
+        self._coarse: np.ndarray | None = None
+
+    # ---------------------------------------------------------------- likelihood field
+    def _build_field(self) -> None:
+        res = self.config.grid_res_m
+        pad = math.ceil(self.margin_m / res) + 2 * COARSE + 2
+        lo = self.points.min(axis=0) - pad * res
+        hi = self.points.max(axis=0) + pad * res
+        shape = (math.ceil((hi[1] - lo[1]) / res) + 1, math.ceil((hi[0] - lo[0]) / res) + 1)
+        occ = np.zeros(shape, dtype=bool)
+        cells = np.floor((self.points - lo) / res).astype(np.int64)
+        occ[cells[:, 1], cells[:, 0]] = True
+        dist = distance_transform_edt(~occ) * res
+        field = np.exp(-0.5 * (dist / self.config.sigma_m) ** 2).astype(np.float32)
+        border = 1 + COARSE
+        field[:border, :] = field[-border:, :] = 0.0
+        field[:, :border] = field[:, -border:] = 0.0
+        coarse = field.copy()
+        for axis in (0, 1):
+            src = coarse.copy()
+            for k in range(1, COARSE):
+                if axis == 0:
+                    np.maximum(coarse[:-k, :], src[k:, :], out=coarse[:-k, :])
+                else:
+                    np.maximum(coarse[:, :-k], src[:, k:], out=coarse[:, :-k])
+        self._origin, self._field, self._coarse = lo, field, coarse
+
+    def field(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if self._field is None:
+            self._build_field()
+        assert self._field is not None and self._coarse is not None
+        return self._origin, self._field, self._coarse
+
+    def _base_cells(self, q: np.ndarray, x: float, y: float, thetas: np.ndarray) -> np.ndarray:
+        """Flat field index of each rotated scan point at translation (x, y): (angles, points)."""
+        origin, field, _ = self.field()
+        res = self.config.grid_res_m
+        c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+        px = c * q[:, 0] - s * q[:, 1] + (x - origin[0])
+        py = s * q[:, 0] + c * q[:, 1] + (y - origin[1])
+        h, w = field.shape
+        ix = np.clip(np.floor(px / res).astype(np.int64), 0, w - 1)
+        iy = np.clip(np.floor(py / res).astype(np.int64), 0, h - 1)
+        return iy * w + ix
+
+    def score(self, q: np.ndarray, pose: Pose) -> float:
+        """Mean likelihood of the robot-frame points ``q`` at ``pose`` (0..1)."""
+        _, field, _ = self.field()
+        idx = self._base_cells(q, pose[0], pose[1], np.array([pose[2]]))[0]
+        return float(field.ravel()[idx].mean()) if len(q) else 0.0
+
+    # ---------------------------------------------------------------- correlative search
+    def search(
+        self, q: np.ndarray, prior: Pose, window_xy_m: float, window_theta: float, theta_step: float
+    ) -> tuple[Pose, float]:
+        """Best pose of the robot-frame points ``q`` within ±window of ``prior`` on the field grid.
+
+        Returns the pose and its score (mean likelihood). Exact on the grid: a coarse block is
+        refined while its upper bound beats the best fine score (up to MAX_BRANCHES blocks).
+        """
+        _, field, coarse = self.field()
+        res = self.config.grid_res_m
+        width = field.shape[1]
+        half = min(math.ceil(window_xy_m / res), int(self.margin_m / res))
+        n_th = round(window_theta / theta_step)
+        thetas = prior[2] + theta_step * np.arange(-n_th, n_th + 1)
+        base = self._base_cells(q, prior[0], prior[1], thetas)  # (A, N)
+        steps = np.arange(-half, half + 1, COARSE)
+        cy, cx = np.meshgrid(steps, steps, indexing="ij")
+        offsets = (cy * width + cx).ravel()
+        flat_coarse, flat_field = coarse.ravel(), field.ravel()
+        bounds = np.empty((len(thetas), len(offsets)), dtype=np.float32)
+        batch = max(1, MAX_LOOKUPS // max(1, q.shape[0] * len(offsets)))
+        for a0 in range(0, len(thetas), batch):
+            idx = base[a0 : a0 + batch, :, None] + offsets[None, None, :]
+            bounds[a0 : a0 + batch] = np.take(flat_coarse, idx, mode="clip").mean(axis=1)
+        order = np.argsort(bounds, axis=None)[::-1]
+        fy, fx = np.meshgrid(np.arange(COARSE), np.arange(COARSE), indexing="ij")
+        fine = (fy * width + fx).ravel()
+        best, best_pose = -1.0, prior
+        for k, flat in enumerate(order):
+            a, o = divmod(int(flat), len(offsets))
+            if bounds[a, o] <= best or k >= MAX_BRANCHES:
+                break
+            scores = np.take(flat_field, base[a][:, None] + offsets[o] + fine[None, :], mode="clip").mean(
+                axis=0
+            )
+            i = int(np.argmax(scores))
+            if scores[i] > best:
+                best = float(scores[i])
+                dy = cy.ravel()[o] + fy.ravel()[i]
+                dx = cx.ravel()[o] + fx.ravel()[i]
+                best_pose = (prior[0] + dx * res, prior[1] + dy * res, float(thetas[a]))
+        return best_pose, max(best, 0.0)
+
+    # ---------------------------------------------------------------- refinement
+    def refine(
+        self, q: np.ndarray, init: Pose, prior: Pose | None = None, prior_info: np.ndarray | None = None
+    ) -> Match:
+        """Point-to-line ICP from ``init``; an optional Gaussian ``prior`` keeps directions the
+        map does not constrain (a long corridor) near the prediction."""
+        cfg = self.config
+        x = np.array(init, dtype=np.float64)
+        jac = np.zeros((len(q), 3))
+        for gate in cfg.icp_stages_m:
+            for _ in range(cfg.icp_iterations):
+                c, s = math.cos(x[2]), math.sin(x[2])
+                p = transform(x, q)
+                dist, j = self.tree.query(p, distance_upper_bound=gate)
+                ok = np.isfinite(dist)
+                if ok.sum() < MIN_MATCH_POINTS:
+                    break
+                n = self.normals[j[ok]]
+                r = np.einsum("ij,ij->i", n, p[ok] - self.points[j[ok]])
+                qk = q[ok]
+                jac = np.column_stack(
+                    (
+                        n[:, 0],
+                        n[:, 1],
+                        n[:, 0] * (-s * qk[:, 0] - c * qk[:, 1]) + n[:, 1] * (c * qk[:, 0] - s * qk[:, 1]),
+                    )
+                )
+                w = np.minimum(1.0, cfg.huber_m / np.maximum(np.abs(r), 1e-12))
+                inv_var = 1.0 / cfg.point_sigma_m**2
+                h = jac.T @ (jac * w[:, None]) * inv_var
+                g = jac.T @ (w * r) * inv_var
+                if prior is not None and prior_info is not None:
+                    d = x - np.asarray(prior)
+                    d[2] = (d[2] + math.pi) % (2 * math.pi) - math.pi
+                    h = h + prior_info
+                    g = g + prior_info @ d
+                try:
+                    step = -np.linalg.solve(h + 1e-9 * np.eye(3), g)
+                except np.linalg.LinAlgError:
+                    break
+                x += step
+                if abs(step[0]) + abs(step[1]) < 1e-5 and abs(step[2]) < 1e-5:
+                    break
+        pose = (float(x[0]), float(x[1]), float((x[2] + math.pi) % (2 * math.pi) - math.pi))
+        return self._evaluate(q, pose)
+
+    def _evaluate(self, q: np.ndarray, pose: Pose) -> Match:
+        cfg = self.config
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        p = transform(pose, q)
+        dist, j = self.tree.query(p, distance_upper_bound=cfg.inlier_m)
+        ok = np.isfinite(dist)
+        info = np.zeros((3, 3))
+        if ok.sum() >= MIN_MATCH_POINTS:
+            n, qk = self.normals[j[ok]], q[ok]
+            jac = np.column_stack(
+                (
+                    n[:, 0],
+                    n[:, 1],
+                    n[:, 0] * (-s * qk[:, 0] - c * qk[:, 1]) + n[:, 1] * (c * qk[:, 0] - s * qk[:, 1]),
+                )
+            )
+            info = (jac.T @ jac) / len(qk) / cfg.point_sigma_m**2
+        score = self.score(q, pose) if self._field is not None else float(ok.mean())
+        return Match(pose, score, float(ok.mean()) if len(q) else 0.0, info)

@@ -1,0 +1,151 @@
+"""The ``slam`` node: online mapping from ``/scan`` + ``/odom`` while an operator drives.
+
+- subscribes ``/scan`` (newest only: a scan that arrives while one is being matched replaces
+  the waiting one) and ``/odom`` (the latest pose is paired with each scan);
+- publishes the growing map on ``/map`` (latched) once a second when it changed, and a
+  :class:`SlamProgress` on ``/slam/progress`` after each scan;
+- offers ``/slam/save`` (:class:`SaveMapRequest` → :class:`SaveMapReply`).
+
+Matching and map building run in a worker thread so the event loop never stalls. The laser
+mount comes from the profile (``robot.lidar``). Map files go to ``ctx.resources["slam_out_dir"]``
+when set, else ``<state dir>/maps``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sage_robot.core import topics
+from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D
+from sage_robot.core.node import Node
+from sage_robot.core.paths import state_dir
+from sage_robot.nav.slam.engine import Slam, SlamConfig
+from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgress
+from sage_robot.nav.slam.occupancy import OccupancyMapper
+from sage_robot.nav.slam.points import Scan
+from sage_robot.nav.slam.store import save_session
+
+MAP_PERIOD_S = 1.0  # /map publication period when the map changed
+MAP_RESOLUTION_M = 0.05
+SLAM_PROGRESS = "/slam/progress"
+SLAM_SAVE = "/slam/save"
+OUT_DIR_RESOURCE = "slam_out_dir"  # ctx.resources key: where /slam/save writes by default
+INITIAL_POSE_RESOURCE = "slam_initial_pose"  # ctx.resources key: (x, y, theta) of the first scan
+AUTOSAVE_RESOURCE = "slam_autosave"  # ctx.resources key: map name to save under when the node stops
+SAVED_RESOURCE = "slam_saved"  # ctx.resources key set by the autosave: the paths written
+
+
+class SlamNode(Node):
+    name = "slam"
+
+    async def setup(self) -> None:
+        lidar = self.settings.robot.lidar
+        self.laser = (lidar.x_m, lidar.y_m, lidar.yaw_rad)
+        initial = self.ctx.resources.get(INITIAL_POSE_RESOURCE, (0.0, 0.0, 0.0))
+        self.slam = Slam(SlamConfig(), initial_pose=tuple(initial))  # type: ignore[arg-type]
+        self.mapper = OccupancyMapper(MAP_RESOLUTION_M, self.slam.config.max_range_m)
+        self._mapped_keyframes = 0
+        self._map_version = 0
+        self._map_dirty = False
+        self._lock = asyncio.Lock()
+        self._odom: Odometry | None = None
+        self.scans = 0
+        self.bus.declare(topics.MAP, OccupancyGrid, latched=True)
+        self.bus.declare(SLAM_PROGRESS, SlamProgress)
+        self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=1)
+        self._scan_sub = self.subscribe(topics.SCAN, LaserScan, maxsize=1)
+        self.bus.serve(SLAM_SAVE, self._on_save)
+        self.spawn(self._scan_loop(), name="slam.scans")
+        self.every(MAP_PERIOD_S, self._publish_map, name="slam.map")
+
+    async def teardown(self) -> None:
+        self.bus.unserve(SLAM_SAVE)
+        name = self.ctx.resources.get(AUTOSAVE_RESOURCE)
+        if not name or not getattr(self, "slam", None) or not self.slam.keyframes:
+            return
+        try:
+            async with self._lock:
+                paths = await asyncio.to_thread(self._save, self.out_dir(), name)
+            self.ctx.resources[SAVED_RESOURCE] = paths
+            self.log.info("map saved on exit", **paths)
+        except Exception as exc:  # teardown must not raise
+            self.log.error("could not save the map on exit", error=str(exc))
+
+    def _on_odom(self, msg: Odometry) -> None:
+        self._odom = msg
+
+    async def _scan_loop(self) -> None:
+        async for msg in self._scan_sub:
+            if self._odom is None:
+                continue  # no odometry yet: nothing to predict from
+            odom = self._odom.pose.as_tuple()
+            scan = Scan(np.asarray(msg.ranges), msg.angles, msg.range_min, msg.range_max, self.laser)
+            async with self._lock:
+                result = await asyncio.to_thread(self._process, msg.stamp, odom, scan)
+            self.scans += 1
+            x, y, th = result.pose
+            self.bus.publish(
+                SLAM_PROGRESS,
+                SlamProgress(
+                    self.clock.now(),
+                    self.scans,
+                    len(self.slam.keyframes),
+                    self.slam.loop_closures,
+                    round(result.score, 4),
+                    Pose2D(x, y, th),
+                    self.slam.optimizations,
+                ),
+            )
+
+    def _process(self, stamp: float, odom: tuple[float, float, float], scan: Scan) -> Any:
+        result = self.slam.add_scan(stamp, odom, scan)
+        self._update_map()
+        return result
+
+    def _update_map(self) -> None:
+        """Add new keyframes to the grid; rebuild it when the graph was optimised."""
+        slam = self.slam
+        if slam.map_version != self._map_version:
+            self.mapper.rebuild(slam.keyframe_poses(), [kf.scan for kf in slam.keyframes])
+            self._map_version, self._mapped_keyframes = slam.map_version, len(slam.keyframes)
+            self._map_dirty = True
+        elif len(slam.keyframes) > self._mapped_keyframes:
+            new = range(self._mapped_keyframes, len(slam.keyframes))
+            self.mapper.integrate_many(
+                [slam.graph.poses[k] for k in new], [slam.keyframes[k].scan for k in new]
+            )
+            self._mapped_keyframes = len(slam.keyframes)
+            self._map_dirty = True
+
+    async def _publish_map(self) -> None:
+        if not self._map_dirty:
+            return
+        self._map_dirty = False
+        grid = await asyncio.to_thread(self.mapper.to_grid, self.clock.now())
+        self.bus.publish(topics.MAP, grid)
+
+    async def _on_save(self, req: SaveMapRequest) -> SaveMapReply:
+        out = Path(req.directory) if req.directory else self.out_dir()
+        async with self._lock:
+            paths = await asyncio.to_thread(self._save, out, req.name)
+        self.log.info("map saved", **paths)
+        return SaveMapReply(paths["yaml"], paths["pgm"], paths["graph"], paths["trajectory"])
+
+    def _save(self, out: Path, name: str) -> dict[str, str]:
+        self._update_map()
+        return save_session(self.slam, out, name, self.mapper.to_grid(self.clock.now()))
+
+    def out_dir(self) -> Path:
+        return Path(self.ctx.resources.get(OUT_DIR_RESOURCE) or state_dir() / "maps")
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            "scans": self.scans,
+            "keyframes": len(self.slam.keyframes),
+            "loop_closures": self.slam.loop_closures,
+            "score": round(self.slam.last_score, 3),
+        }
