@@ -48,6 +48,7 @@ CHROMIUM_ARGS = [
     "--no-first-run",
     "--use-fake-ui-for-media-stream",
     "--use-fake-device-for-media-stream",
+    "--autoplay-policy=no-user-gesture-required",  # the kiosk tablet is set up so
 ]
 MAP_RES_M = 0.05
 WORLD_NODES = ("sim_world", "map_server", "localization", "navigator")  # used when registered

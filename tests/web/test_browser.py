@@ -12,10 +12,11 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 
 from sage_robot.core import topics
-from sage_robot.core.msgs.voice import Doa, Phase, UiState
+from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
 
 pytestmark = pytest.mark.browser
 
@@ -221,6 +222,12 @@ def test_face_follows_ui_state_and_doa(browser: Any, robot: Any) -> None:
     page.screenshot(path=str(robot.artifacts / "face-speaking.png"))
     robot.publish(topics.UI_STATE, UiState(Phase.THINKING))
     page.wait_for_selector("body[data-phase=thinking]", timeout=WAIT_S * 1000)
+    # in simulation the kiosk plays the robot's voice: 0.1 s chunks of a 440 Hz tone
+    t = np.arange(1600) / 16000.0
+    tone = (0.3 * 32767 * np.sin(2 * np.pi * 440.0 * t)).astype("<i2").tobytes()
+    for i in range(3):
+        robot.publish(topics.AUDIO_OUT, AudioChunk(0.0, 16000, tone, 0.5, 1, final=i == 2))
+    page.wait_for_function("Number(document.body.dataset.audioChunks) >= 3")
     page.close()
     assert console.errors == []
 

@@ -229,3 +229,25 @@ def test_visitor_questions_are_rate_limited(client: httpx.Client) -> None:
     limited = client.post("/api/talk/text", json={"text": "one more"})
     assert limited.status_code == 429 and "Retry-After" in limited.headers
     assert "too many" in limited.json()["error"]
+
+
+def test_a_growing_map_reaches_the_page(robot: Any, client: httpx.Client, cookie: str) -> None:
+    """SLAM republishes /map as it grows: the live socket announces each version, the PNG follows."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    from sage_robot.core.msgs import OccupancyGrid, Pose2D
+
+    with connect(ws_url(robot, "/ws/live"), additional_headers={"Cookie": cookie}, open_timeout=WAIT_S) as ws:
+        first = recv_json(ws, "map")
+        grown = OccupancyGrid(0.0, "map", 0.05, Pose2D(-1.0, -1.0, 0.0), np.zeros((30, 50), dtype=np.int8))
+        robot.publish(topics.MAP, grown)
+        second = recv_json(ws, "map", timeout=WAIT_S)
+        while second["version"] == first["version"]:
+            second = recv_json(ws, "map", timeout=WAIT_S)
+    assert (second["width"], second["height"]) == (50, 30)
+    png = client.get(second["url"], headers={"Cookie": cookie})
+    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+    assert Image.open(io.BytesIO(png.content)).size == (50, 30)

@@ -11,6 +11,7 @@ Events (arrivals, safety stops) are the exception: each is kept, in a short ring
 from __future__ import annotations
 
 import asyncio
+import struct
 import time
 from collections import deque
 from collections.abc import Iterable
@@ -31,7 +32,7 @@ from sage_robot.core.msgs import (
 )
 from sage_robot.core.msgs.nav import LocalizationHealth
 from sage_robot.core.msgs.sim import People
-from sage_robot.core.msgs.voice import Doa, UiState
+from sage_robot.core.msgs.voice import AudioChunk, Doa, UiState
 from sage_robot.core.node import Node
 from sage_robot.web import views
 
@@ -53,6 +54,8 @@ MIN_INTERVAL_S: dict[str, float] = {
     "camera": 1.0 / 15.0,  # frames/s cap per client; web.camera_fps overrides
 }
 EVENTS_KEPT = 50  # recent events shown on a newly opened page
+QUEUE_KEPT = 100  # events and audio chunks queued per client before the oldest is dropped
+AUDIO_HEADER = struct.Struct("<I")  # binary audio message: sample rate (Hz), then int16 LE PCM
 AMCL_FRESH_S = 2.0  # prefer the AMCL pose over odometry while it is this recent (clock s)
 
 
@@ -62,7 +65,7 @@ class Listener:
 
     channels: frozenset[str]
     dirty: set[str] = field(default_factory=set)
-    events: deque[dict[str, Any]] = field(default_factory=lambda: deque(maxlen=EVENTS_KEPT))
+    events: deque[dict[str, Any] | bytes] = field(default_factory=lambda: deque(maxlen=QUEUE_KEPT))
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     last_sent: dict[str, float] = field(default_factory=dict)
 
@@ -109,6 +112,7 @@ class Hub:
         sub(topics.CAMERA, CompressedImage, self._on_camera, maxsize=2)
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
         sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
+        sub(topics.AUDIO_OUT, AudioChunk, self._on_audio, maxsize=50)
         sub(topics.SIM_PEOPLE, People, self._on_people)  # published only by the simulator
         self.set("estop", {"type": "estop", "engaged": False})
 
@@ -132,13 +136,14 @@ class Hub:
     def unlisten(self, listener: Listener) -> None:
         self.listeners.discard(listener)
 
-    async def next_batch(self, listener: Listener) -> tuple[list[dict[str, Any]], bool]:
-        """Wait for something to send: (JSON messages, whether a new camera frame is due)."""
+    async def next_batch(self, listener: Listener) -> tuple[list[dict[str, Any] | bytes], bool]:
+        """Wait for something to send: (JSON messages and binary audio chunks, in order;
+        whether a new camera frame is due)."""
         while True:
             await listener.wake.wait()
             listener.wake.clear()
             now = time.monotonic()
-            out: list[dict[str, Any]] = []
+            out: list[dict[str, Any] | bytes] = []
             camera = False
             wait_s: float | None = None
             for ch in sorted(listener.dirty):
@@ -232,6 +237,19 @@ class Hub:
         for listener in self.listeners:
             if "events" in listener.channels:
                 listener.events.append(item)
+                listener.wake.set()
+
+    def _on_audio(self, msg: AudioChunk) -> None:
+        """The robot's speech: queued in order for /ws/audio clients (the simulated kiosk)."""
+        self.counts["audio_in"] = self.counts.get("audio_in", 0) + 1
+        items: list[dict[str, Any] | bytes] = []
+        if msg.pcm:
+            items.append(AUDIO_HEADER.pack(msg.sample_rate) + msg.pcm)
+        if msg.final:
+            items.append({"type": "audio_end", "utterance": msg.utterance})
+        for listener in self.listeners:
+            if "audio" in listener.channels:
+                listener.events.extend(items)
                 listener.wake.set()
 
     # ------------------------------------------------------------ map image

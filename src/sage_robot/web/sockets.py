@@ -76,7 +76,10 @@ async def _pump(ws: WebSocket, channels: tuple[str, ...], camera: bool = False) 
         while True:
             messages, frame_due = await hub.next_batch(listener)
             for m in messages:
-                await ws.send_json(m)
+                if isinstance(m, bytes):
+                    await ws.send_bytes(m)
+                else:
+                    await ws.send_json(m)
             if frame_due and hub.frame:
                 await ws.send_bytes(hub.frame)
     except (WebSocketDisconnect, RuntimeError, asyncio.CancelledError):
@@ -168,6 +171,15 @@ async def ws_doa(ws: WebSocket) -> None:
     if not await _admit(ws, operator=False):
         return
     await _serve(ws, ("doa",), _common)
+
+
+@router.websocket("/ws/audio")
+async def ws_audio(ws: WebSocket) -> None:
+    """The robot's speech (public, for the kiosk in simulation): binary messages of a
+    uint32 LE sample rate followed by int16 LE mono PCM, and ``{"type": "audio_end"}``."""
+    if not await _admit(ws, operator=False):
+        return
+    await _serve(ws, ("audio",), _common)
 
 
 @router.websocket("/ws/live")

@@ -1,7 +1,7 @@
 // The kiosk face: phase, mouth from tts_viseme, pupils from the DOA angle, blinking, captions.
 // DOA convention (seed): 0° behind, 90° left, 180° in front, 270° right. The face looks at
 // the speaker, so a speaker on the robot's left moves the pupils to the screen's right.
-import { $, batteryText, LiveSocket } from "./common.js";
+import { $, api, batteryText, LiveSocket } from "./common.js";
 
 const PUPIL_MAX_PX = 22; // pupil travel from the eye's centre (SVG units)
 const MOUTH_MIN = 5; // mouth half-height closed / fully open (SVG units)
@@ -61,6 +61,44 @@ new LiveSocket("/ws/status", {
   },
 });
 new LiveSocket("/ws/doa", { onMessage: (msg) => msg.type === "doa" && lookAt(msg.angle) });
+
+// ---------------------------------------------------------------- the robot's voice (simulation)
+// /ws/audio sends binary chunks: uint32 LE sample rate, then int16 LE mono PCM. On the real
+// robot the speaker plays them; in simulation this tablet is the speaker.
+let audio = null;
+let playAt = 0;
+let chunks = 0;
+
+function playChunk(buf) {
+  if (!audio) audio = new AudioContext();
+  const rate = new DataView(buf).getUint32(0, true);
+  const pcm = new Int16Array(buf.slice(4));
+  if (pcm.length === 0) return;
+  const out = audio.createBuffer(1, pcm.length, rate);
+  const ch = out.getChannelData(0);
+  for (let i = 0; i < pcm.length; i++) ch[i] = pcm[i] / 32768;
+  const src = audio.createBufferSource();
+  src.buffer = out;
+  src.connect(audio.destination);
+  playAt = Math.max(playAt, audio.currentTime + 0.05);
+  src.start(playAt);
+  playAt += out.duration;
+  chunks += 1;
+  document.body.dataset.audioChunks = String(chunks);
+  $("sound").hidden = audio.state === "running";
+}
+
+$("sound").addEventListener("click", () => {
+  if (!audio) audio = new AudioContext();
+  audio.resume().then(() => ($("sound").hidden = true));
+});
+
+api("/api/health").then(({ ok, data }) => {
+  if (!ok || !data.simulated) return;
+  new LiveSocket("/ws/audio", {
+    onBinary: async (blob) => playChunk(await blob.arrayBuffer()),
+  });
+});
 
 lookAt(180);
 setMouth(0);

@@ -146,10 +146,14 @@ export class LiveMap {
       g.fill();
     }
     if (L.pose) this.drawRobot(L.pose, v);
+    g.font = "13px system-ui";
     if (L.loc) {
       g.fillStyle = L.loc.lost ? "#f85149" : "#e8eef5";
-      g.font = "13px system-ui";
       g.fillText(`localization ${(L.loc.score * 100).toFixed(0)} %${L.loc.lost ? " · LOST" : ""}`, 8, 18);
+    }
+    if (L.pose && L.pose.frame !== "map") {
+      g.fillStyle = "#d29922";
+      g.fillText(`robot drawn from ${L.pose.frame} (not localized on the map)`, 8, 36);
     }
     if (this.press && this.press.dragging) {
       const [x1, y1] = [this.press.px, this.press.py], [x2, y2] = [this.press.qx, this.press.qy];
