@@ -32,8 +32,8 @@ class WebNode(Node):
 
     async def setup(self) -> None:
         from sage_robot.web.app import create_app
-        from sage_robot.web.auth import Sessions, operator_password
-        from sage_robot.web.common import WebState
+        from sage_robot.web.auth import RateLimiter, Sessions, operator_password
+        from sage_robot.web.common import TALK_BURST, WebState
         from sage_robot.web.hub import Hub
         from sage_robot.web.teleop import Teleop
 
@@ -44,7 +44,13 @@ class WebNode(Node):
         self.teleop = Teleop(self, self.hub)
         self.teleop.start()
         self.sessions = Sessions(operator_password(self.settings))
-        self.state = WebState(self, self.hub, self.teleop, self.sessions)
+        self.state = WebState(
+            self,
+            self.hub,
+            self.teleop,
+            self.sessions,
+            talk_limiter=RateLimiter(web.talk_per_min, TALK_BURST),
+        )
         self.app = create_app(self.state)
         self.sock = _bind(web.host, web.port)
         self.port = int(self.sock.getsockname()[1])
