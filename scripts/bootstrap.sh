@@ -49,11 +49,14 @@ python_packages() {
     say "creating $VENV with $py"
     "$py" -m venv "$VENV"
   fi
-  local want; want=$(cat pyproject.toml scripts/bootstrap.sh | sha256sum | cut -c1-16)
+  local want; want=$(cat pyproject.toml scripts/bootstrap.sh scripts/pip-no-deps.txt | sha256sum | cut -c1-16)
   if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$want" ]; then return 0; fi
   say "installing Python packages into .venv (first run takes a few minutes)"
   "$VENV/bin/python" -m pip install -q --upgrade pip
   "$VENV/bin/python" -m pip install -q -e ".[all,dev]"
+  # Packages whose declared dependencies we do not use (see the file's comments).
+  local nodeps=(); mapfile -t nodeps < <(grep -v '^\s*#' scripts/pip-no-deps.txt | awk 'NF {print $1}')
+  [ ${#nodeps[@]} -eq 0 ] || "$VENV/bin/python" -m pip install -q --no-deps "${nodeps[@]}"
   echo "$want" > "$STAMP"
 }
 

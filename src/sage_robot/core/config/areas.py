@@ -5,6 +5,8 @@ Paths that are empty mean "the file shipped in the package".
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import Field
 
 from sage_robot.core.config.base import Section
@@ -95,11 +97,14 @@ class LlmSettings(Section):
 
 
 class KbSettings(Section):
-    backend: str = Field("sqlite", description="'sqlite' or 'postgres'.")
-    path: str = Field("", description="SQLite file; empty = the user's data directory.")
+    backend: Literal["sqlite", "postgres"] = Field("sqlite", description="'sqlite' or 'postgres'.")
+    path: str = Field(
+        "", description="SQLite file; empty = $SAGE_DATA_DIR or ~/.local/share/sage/kb.sqlite3."
+    )
     dsn: str = Field("", description="PostgreSQL DSN; empty with backend postgres = embedded.")
     embedder: str = Field("all-MiniLM-L6-v2", description="Embedding model name.")
-    top_k: int = Field(5, gt=0, description="Passages returned by default.")
+    top_k: int = Field(5, gt=0, le=50, description="Passages returned by default.")
+    load_corpus: bool = Field(True, description="Ingest the shipped corpus into an empty store.")
 
 
 class WebSettings(Section):

@@ -17,8 +17,9 @@ class Passage:
     source: str  # file name or URL
     title: str = ""
     section: str = ""  # heading path or page
-    score: float = 0.0
+    score: float = 0.0  # fused rank score (reciprocal rank fusion), higher is better
     document_id: int = 0
+    similarity: float = 0.0  # cosine similarity of query and passage vectors (-1..1)
 
 
 @message()
