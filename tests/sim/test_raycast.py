@@ -6,11 +6,12 @@ import math
 
 import numpy as np
 import pytest
-from .simgrids import grid_from_art
 
 from sage_robot.core.msgs import OccupancyGrid, Pose2D
 from sage_robot.sim import raycast
 from sage_robot.sim.raycast import GridRaycaster, ray_boxes, ray_circles
+
+from .simgrids import grid_from_art
 
 EAST, NORTH, WEST, SOUTH = 0.0, math.pi / 2, math.pi, -math.pi / 2
 
@@ -72,7 +73,8 @@ def test_grazing_beams_match_a_full_trace(campus_raycaster: GridRaycaster) -> No
     """The dense-sampling finish for grazing beams agrees with tracing every cell."""
     angles = np.linspace(-math.pi, math.pi, 360, endpoint=False)
     rng = np.random.default_rng(1)
-    for x, y in [(50.0, 40.0), (50.3, 57.5), (20.0, 40.2), (60.0, 62.9)] + [
+    # (Positions off the cell grid lines: a ray running exactly along a cell boundary is degenerate.)
+    for x, y in [(50.013, 40.021), (50.3, 57.51), (20.007, 40.2), (60.01, 62.93)] + [
         (float(rng.uniform(2, 98)), float(rng.uniform(39, 41))) for _ in range(3)
     ]:
         fast = campus_raycaster.cast(x, y, angles, 12.0)
@@ -84,7 +86,7 @@ def test_grazing_beams_match_a_full_trace(campus_raycaster: GridRaycaster) -> No
             raycast.TRACE_ITERS = old
         both = np.isfinite(fast) & np.isfinite(exact)
         assert (np.isfinite(fast) == np.isfinite(exact)).mean() > 0.99
-        assert np.abs(fast[both] - exact[both]).max() < 0.06  # at most a clipped corner
+        assert np.abs(fast[both] - exact[both]).max() < 1e-3
 
 
 def test_ray_circles() -> None:

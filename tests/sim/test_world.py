@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 from PIL import Image
-from .simgrids import grid_from_art
 
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs.sim import LowObstacle
@@ -16,6 +15,8 @@ from sage_robot.sim.lidar import LidarSpec
 from sage_robot.sim.people import PersonState
 from sage_robot.sim.setup import build_world
 from sage_robot.sim.world import Collision, World
+
+from .simgrids import grid_from_art
 
 DT = 0.01
 TRACK_M = 0.381

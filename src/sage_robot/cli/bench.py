@@ -8,6 +8,7 @@ import importlib
 import json
 
 BENCHMARKS: dict[str, str] = {
+    "sim": "sage_robot.bench.sim",
     "bus": "sage_robot.bench.bus",
     "kb": "sage_robot.bench.kb",
     "mcu": "sage_robot.bench.mcu",

@@ -22,8 +22,11 @@ OCCUPIED_MIN = 50  # cells with a value >= this block rays (0..100 scale)
 SQRT2 = math.sqrt(2.0)
 CROSS_EPS_CELLS = 1e-4  # how far past a cell boundary a DDA step lands (cells)
 MIN_SPHERE_STEP_CELLS = 1.0  # below this safe distance, step cell by cell
-TRACE_ITERS = 24  # traced steps before the grazing beams left are finished by sampling
-SAMPLE_STEP_CELLS = 0.5  # sampling step for those (may miss a corner clipped by < 1/2 cell)
+TRACE_ITERS = 14  # traced steps before the grazing beams left are finished by sampling...
+SAMPLE_MAX_BEAMS = 24  # ...once no more than this many are left (sampling costs per beam)
+MAX_TRACE_ITERS = 400
+SAMPLE_STEP_CELLS = 1.0  # sampling step for those (cells clipped in between are checked)
+REFINE_STEPS = 4  # exact cell steps between the last free and the first occupied sample
 FREE_CODE, OCC_CODE, OUT_CODE = 0, 1, 2
 HUGE = 1e30
 
@@ -108,7 +111,7 @@ class GridRaycaster:
         dx_all, dy_all = np.cos(a), np.sin(a)
         tmax = max_range / self.res
         idx = np.arange(n)
-        t = np.zeros(n)
+        t = t_free = np.zeros(n)
         dx, dy = dx_all, dy_all
         # Next-boundary terms of the cell walk; a zero direction component never crosses.
         with np.errstate(divide="ignore"):
@@ -116,7 +119,9 @@ class GridRaycaster:
             inv_dy = np.where(dy != 0.0, 1.0 / dy, HUGE)
         sx, sy = (dx >= 0).astype(np.float64), (dy >= 0).astype(np.float64)
         codes, safe_flat, pw, w, h = self._codes, self._safe_flat, self._pad_w, self.width, self.height
-        for _ in range(TRACE_ITERS):
+        for it in range(MAX_TRACE_ITERS):
+            if it >= TRACE_ITERS and idx.size <= SAMPLE_MAX_BEAMS:
+                break
             px, py = gx0 + t * dx, gy0 + t * dy
             ix, iy = np.floor(px), np.floor(py)
             flat = ((np.clip(iy, -1, h) + 1) * pw + (np.clip(ix, -1, w) + 1)).astype(np.intp)
@@ -133,12 +138,19 @@ class GridRaycaster:
                     break
             safe = safe_flat[flat]
             cross = np.minimum((ix + sx - px) * inv_dx, (iy + sy - py) * inv_dy)
+            t_free = t  # checked: free
             t = t + np.where(safe >= MIN_SPHERE_STEP_CELLS, safe, cross + CROSS_EPS_CELLS)
         if idx.size:
-            # Beams still going after TRACE_ITERS graze a wall: finish them by dense sampling.
-            out[idx] = self._sample(gx0, gy0, dx_all[idx], dy_all[idx], t, tmax) * self.res
+            # Beams still going after TRACE_ITERS graze a wall: finish them by dense sampling
+            # from their last position known to be free.
+            out[idx] = self._sample(gx0, gy0, dx_all[idx], dy_all[idx], t_free, tmax) * self.res
         out[out > max_range] = np.inf
         return out
+
+    def _code_at(self, ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
+        """FREE/OCC/OUT code of integer-valued float cell indices (any shape)."""
+        flat = (np.clip(iy, -1, self.height) + 1) * self._pad_w + (np.clip(ix, -1, self.width) + 1)
+        return self._codes[flat.astype(np.intp)]
 
     def _sample(
         self, gx0: float, gy0: float, dx: np.ndarray, dy: np.ndarray, t0: np.ndarray, tmax: float
@@ -149,22 +161,44 @@ class GridRaycaster:
         ts = t0[:, None] + steps[None, :]  # (beams, samples)
         ix = np.floor(gx0 + ts * dx[:, None])
         iy = np.floor(gy0 + ts * dy[:, None])
-        flat = ((np.clip(iy, -1, self.height) + 1) * self._pad_w + (np.clip(ix, -1, self.width) + 1)).astype(
-            np.intp
-        )
-        code = self._codes[flat]
+        code = self._code_at(ix, iy)
         code[ts > tmax] = OUT_CODE
+        # Between two samples (< 1 cell apart) a ray can clip the corner of one more cell: the
+        # one it enters when it crosses the first of the x and y boundaries in between.
+        px0, py0, ix0, iy0 = ix[:, :-1], iy[:, :-1], ix[:, 1:], iy[:, 1:]
+        both = (px0 != ix0) & (py0 != iy0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tbx = (np.maximum(px0, ix0) - gx0) / dx[:, None]
+            tby = (np.maximum(py0, iy0) - gy0) / dy[:, None]
+        x_first = tbx < tby
+        mid = self._code_at(np.where(x_first, ix0, px0), np.where(x_first, py0, iy0))
+        code[:, 1:] = np.where(both & (mid == OCC_CODE), OCC_CODE, code[:, 1:])
         stop = code != FREE_CODE
         first = np.argmax(stop, axis=1)
         rows = np.arange(len(dx))
         hit = code[rows, first] == OCC_CODE
-        cx, cy = ix[rows, first], iy[rows, first]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tx = np.where(dx != 0, (cx + (dx < 0) - gx0) / dx, -np.inf)
-            ty = np.where(dy != 0, (cy + (dy < 0) - gy0) / dy, -np.inf)
-        lo = ts[rows, np.maximum(first - 1, 0)]
-        entry = np.clip(np.maximum(tx, ty), lo, ts[rows, first])
-        return np.where(hit, entry, np.inf)
+        # The wall was entered between the last free sample and the first occupied one: walk
+        # the (at most three) cell boundaries in between exactly.
+        t = ts[rows, np.maximum(first - 1, 0)]
+        out = np.full(len(dx), np.inf)
+        pending = hit.copy()
+        with np.errstate(divide="ignore"):
+            inv_dx = np.where(dx != 0.0, 1.0 / dx, HUGE)
+            inv_dy = np.where(dy != 0.0, 1.0 / dy, HUGE)
+        sx, sy = (dx >= 0).astype(np.float64), (dy >= 0).astype(np.float64)
+        for _ in range(REFINE_STEPS):
+            px, py = gx0 + t * dx, gy0 + t * dy
+            ix, iy = np.floor(px), np.floor(py)
+            t = t + np.minimum((ix + sx - px) * inv_dx, (iy + sy - py) * inv_dy) + CROSS_EPS_CELLS
+            cx, cy = np.floor(gx0 + t * dx), np.floor(gy0 + t * dy)
+            now_hit = pending & (self._code_at(cx, cy) == OCC_CODE)
+            out[now_hit] = t[now_hit]
+            pending &= ~now_hit
+            if not pending.any():
+                break
+        if pending.any():  # should not happen; fall back to the first occupied sample
+            out[pending] = ts[rows, first][pending]
+        return out
 
 
 def ray_circles(x: float, y: float, angles: np.ndarray, circles: np.ndarray) -> np.ndarray:
