@@ -23,11 +23,13 @@ _HEADING = re.compile(r"^\s{0,3}#{1,6}\s*", re.MULTILINE)
 _QUOTE = re.compile(r"^\s*>\s?", re.MULTILINE)
 _BULLET = re.compile(r"^\s*(?:[-*+•]|\d{1,2}[.)])\s+", re.MULTILINE)
 _TABLE_RULE = re.compile(r"^\s*\|?[\s:|-]{3,}\|?\s*$", re.MULTILINE)
+_PARENS = re.compile(r"\s*\(([^()]*)\)")
 _WORD_SLASH = re.compile(r"(?<=[A-Za-z])/(?=[A-Za-z])")
 _MONEY = re.compile(r"\$(\d[\d,]*(?:\.\d+)?)")
 _UNSPEAKABLE = re.compile(r"[^\w\s.,!?;:'\"’-]")
 _SPACE_BEFORE_PUNCT = re.compile(r"\s+([.,!?;:])")
-_REPEATED_PUNCT = re.compile(r"([.,!?;:])[.,;:]+")
+_REPEATED_PUNCT = re.compile(r"([.,!?;:])(?:\s*[.,;:])+")
+_PAUSE_BEFORE_END = re.compile(r"[,;:]\s*([.!?])")
 
 _SYMBOL_WORDS = {
     "&": " and ",
@@ -60,6 +62,7 @@ def speakable(text: str) -> str:
     t = _QUOTE.sub("", t)
     t = _BULLET.sub("", t)
     t = _MONEY.sub(r"\1 dollars", t)
+    t = _PARENS.sub(r", \1,", t)
     t = _WORD_SLASH.sub(" or ", t)
     t = t.replace("|", ", ")
     for sym, word in _SYMBOL_WORDS.items():
@@ -68,6 +71,7 @@ def speakable(text: str) -> str:
     t = _UNSPEAKABLE.sub(" ", t)
     t = " ".join(t.split())
     t = _SPACE_BEFORE_PUNCT.sub(r"\1", t)
+    t = _PAUSE_BEFORE_END.sub(r"\1", t)
     t = _REPEATED_PUNCT.sub(r"\1", t)
     return t.strip(" ,;:-")
 
