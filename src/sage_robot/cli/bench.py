@@ -13,6 +13,7 @@ BENCHMARKS: dict[str, str] = {
     "kb": "sage_robot.bench.kb",
     "mcu": "sage_robot.bench.mcu",
     "brain": "sage_robot.bench.brain",
+    "voice": "sage_robot.bench.voice",
     "web": "sage_robot.bench.web",
     "slam": "sage_robot.bench.slam",
 }
@@ -29,7 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             bp = bsub.add_parser(name, help=f"(unavailable: {exc})")
             bp.set_defaults(func=lambda a, e=exc, n=name: _unavailable(n, e))
             continue
-        bp = bsub.add_parser(name, help=(module.__doc__ or "").strip().splitlines()[0])
+        bp = bsub.add_parser(name, help=((module.__doc__ or "").strip().splitlines() or [name])[0])
         bp.add_argument("--json", action="store_true", help="print only the JSON line")
         module.add_arguments(bp)
         bp.set_defaults(func=lambda a, m=module: _run(m, a))
