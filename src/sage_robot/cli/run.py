@@ -37,6 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     p = sub.add_parser("up", help="start the real robot's nodes from the profile")
     p.add_argument("--mode", default="tour", choices=["tour", "slam"], help="what the robot does")
+    p.add_argument("--imu", action="store_true",
+                   help="publish /imu/data and fuse it (the seed's *_with_imu.sh scripts)")
     p.set_defaults(func=run_up)
 
 
@@ -145,7 +147,8 @@ def _print_summary(summary: dict[str, Any], as_json: bool) -> None:
 
 
 def run_up(args: argparse.Namespace) -> int:
-    settings = load_profile(args.profile)
+    imu = {"mcu": {"imu_enabled": True}, "nav": {"use_ekf": True}} if args.imu else None
+    settings = load_profile(args.profile, imu)
     ctx = make_context(settings, simulated=False)
     asyncio.run(run_launcher(ctx, specs_for(args.mode)))
     return 0
