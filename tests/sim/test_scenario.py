@@ -128,3 +128,39 @@ def test_sage_sim_reports_a_bad_scenario_in_one_line(tmp_path: Path) -> None:
     proc = run_cli("sim", "--headless", "--scenario", str(write(tmp_path, "events: 3\n")), timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.strip().startswith("sage: error:") and "Traceback" not in proc.stderr
+
+
+def test_bundled_scenarios_load_and_build() -> None:
+    from sage_robot.sim.scenario import bundled_scenarios
+    from sage_robot.sim.setup import build_world
+
+    names = bundled_scenarios()
+    assert {"low_bench", "crowded_corridor", "visitor", "teleop_drive"} <= set(names)
+    for name in names:
+        sc = load_scenario(name)
+        over = sc.settings_overrides()
+        world = build_world(load_profile(None, over or None), sc)  # poses valid, people placed
+        assert len(world.crowd.people) == (sc.pedestrians or 0) + len(sc.people), name
+
+
+async def test_teleop_scenario_drives_down_the_corridor() -> None:
+    scenario = load_scenario("teleop_drive")
+    settings = load_profile(
+        None, {"sim": {"speed": None, "camera_hz": 0, **scenario.settings_overrides()["sim"]}}
+    )
+    ctx = make_context(settings, simulated=True)
+    ctx.resources[SCENARIO_RESOURCE] = scenario
+    await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=20.0)
+    world = ctx.resources[WORLD_RESOURCE]
+    assert world.collisions == 0
+    assert world.x == pytest.approx(50.0, abs=0.3)  # in the corridor's middle
+    assert world.y < 57.5 - 6.0  # drove south
+
+
+def test_web_addresses_and_node_selection_errors() -> None:
+    from sage_robot.cli.run import web_addresses
+
+    urls = web_addresses(load_profile(None, {"web": {"port": 8123}}))
+    assert urls[0] == "http://localhost:8123/" and all(u.startswith("http://localhost:8123/") for u in urls)
+    proc = run_cli("sim", "--headless", "--nodes", "sim_world,warp_drive", "--duration", "1", timeout=60)
+    assert proc.returncode == 2 and "warp_drive not in the sim profile" in proc.stderr

@@ -37,8 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     p = sub.add_parser("up", help="start the real robot's nodes from the profile")
     p.add_argument("--mode", default="tour", choices=["tour", "slam"], help="what the robot does")
-    p.add_argument("--imu", action="store_true",
-                   help="publish /imu/data and fuse it (the seed's *_with_imu.sh scripts)")
+    p.add_argument(
+        "--imu", action="store_true", help="publish /imu/data and fuse it (the seed's *_with_imu.sh scripts)"
+    )
     p.set_defaults(func=run_up)
 
 

@@ -203,12 +203,25 @@ def parse_scenario(data: Any, source: str, base: Path | None = None) -> Scenario
     )
 
 
+BUNDLED_DIR = Path(__file__).with_name("scenarios")  # example scenarios shipped with the package
+
+
+def bundled_scenarios() -> list[str]:
+    """Names of the scenarios shipped in ``sim/scenarios/`` (``sage sim --scenario NAME``)."""
+    return sorted(p.stem for p in BUNDLED_DIR.glob("*.yaml"))
+
+
 def load_scenario(path: str | Path) -> Scenario:
+    """A scenario file, or the name of a bundled one (``low_bench``, ``visitor``...)."""
     p = Path(path)
+    if not p.exists() and p.suffix == "" and (BUNDLED_DIR / f"{p.name}.yaml").exists():
+        p = BUNDLED_DIR / f"{p.name}.yaml"
     try:
         data = yaml.safe_load(p.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise ConfigError(f"{p}: scenario file not found") from None
+        raise ConfigError(
+            f"{p}: scenario file not found (bundled scenarios: {', '.join(bundled_scenarios())})"
+        ) from None
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: not valid YAML: {exc}") from None
     return parse_scenario(data, str(p), p.parent)

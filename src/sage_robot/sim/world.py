@@ -72,6 +72,10 @@ class World:
             [[o.x, o.y, o.length_m, o.depth_m, o.yaw, o.height_m] for o in self.low_obstacles],
             dtype=np.float64,
         ).reshape(-1, 6)
+        # Centre and half-diagonal + body radius of each box: farther away, no contact possible.
+        self._box_reach = [
+            (float(b[0]), float(b[1]), 0.5 * math.hypot(b[2], b[3]) + robot_radius) for b in self._boxes
+        ]
         self.crowd = Crowd(
             list(people or []), lanes, self.raycaster.clearance_at, self.rng_people, self.line_of_sight
         )
@@ -135,9 +139,10 @@ class World:
         out = set()
         if self.raycaster.clearance_at(x, y) < r:
             out.add("wall:map")
-        if self._boxes.size:
-            d = _box_distance(x, y, self._boxes)
-            out.update(f"low_obstacle:{self.low_obstacles[i].name}" for i in np.flatnonzero(d < r))
+        for i, (bx, by, reach) in enumerate(self._box_reach):
+            if abs(x - bx) < reach and abs(y - by) < reach:  # cheap test first
+                if float(_box_distance(x, y, self._boxes[i : i + 1])[0]) < r:
+                    out.add(f"low_obstacle:{self.low_obstacles[i].name}")
         for p in self.crowd.people:
             if math.hypot(p.x - x, p.y - y) < r + PERSON_RADIUS_M:
                 out.add(f"person:{p.id}")
