@@ -56,6 +56,8 @@ async def test_converse_streams_sentences_as_feedback_and_returns_the_reply() ->
         assert result.ok and len(feedback) == 2
         assert result.value == Text(" ".join(feedback))
         assert node.stats() == {"brain": "offline", "turns": 1}
+        feedback, result = await asyncio.wait_for(converse(bus, "   "), WAIT_S)
+        assert feedback == [result.value.data] and "did not catch that" in result.value.data
     finally:
         await stop(node)
 

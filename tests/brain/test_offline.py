@@ -157,3 +157,12 @@ async def test_places_come_from_the_bus_service_before_the_file(brain, nav) -> N
     assert (await brain.robot.places()).names() == ["CLEAN_ROOM", "BATHROOMS"]
     result = await brain.respond("what places can you take me to")
     assert result.reply == "I can take you to the Clean Room and the Bathrooms. Where would you like to go?"
+
+
+async def test_where_am_i_before_any_pose_estimate(brain, nav) -> None:
+    nav.position = (float("nan"), float("nan"))
+    result = await brain.respond("where am i")
+    assert (
+        result.reply
+        == "I am not sure where we are: the robot does not know where it is yet, no pose estimate."
+    )

@@ -17,7 +17,7 @@ import asyncio
 from typing import Any
 
 from sage_robot.brain.base import Brain, TurnResult
-from sage_robot.brain.phrases import EVENT_LINES, place_phrase, upper_first, welcome
+from sage_robot.brain.phrases import EVENT_LINES, UNKNOWN, place_phrase, upper_first, welcome
 from sage_robot.brain.robot import RobotLink
 from sage_robot.brain.tools import ToolContext, ToolRegistry
 from sage_robot.core import topics
@@ -73,6 +73,9 @@ class BrainNode(Node):
         self._last_turn = now
 
     async def _converse(self, goal: Text, ctx: GoalContext) -> Text:
+        if not goal.data.strip():  # an empty transcript: nothing to think about
+            ctx.feedback(Text(UNKNOWN))
+            return Text(UNKNOWN)
         async with self._lock:
             self._idle_check()
             result = await self.brain.respond(goal.data, lambda s: ctx.feedback(Text(s)))

@@ -175,6 +175,8 @@ async def where_am_i(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
     if not out.ok:
         return ToolResult.fail(out.reason)
     w = out.data
+    if not w.nearest_place or math.isnan(w.distance_m):
+        return ToolResult.fail("the robot does not know where it is yet (no pose estimate)")
     return ToolResult(
         True,
         {
