@@ -45,6 +45,9 @@ GLOBAL_CANDIDATES = 60_000  # poses scored during global localization
 GLOBAL_HEADINGS = 16
 GLOBAL_BEAMS = 30
 INIT_SIGMA_XY_M, INIT_SIGMA_YAW_RAD = 0.25, 0.2
+CLUSTER_CELL_M = 0.5  # particles are grouped on this grid to find the heaviest cluster
+CLUSTER_RADIUS_M = 1.0  # the estimate averages particles this close to that cluster
+MAX_INJECT_FRACTION = 0.2  # at most this share of particles is redrawn at random per update
 
 
 @dataclass(frozen=True)
@@ -254,7 +257,7 @@ class ParticleFilter:
         positions = (self.rng.random() + np.arange(n)) / n
         idx = np.minimum(np.searchsorted(np.cumsum(self.weights), positions), n_old - 1)
         new = self.particles[idx]
-        p_inject = max(0.0, 1.0 - self.w_fast / self.w_slow) if self.w_slow > 0 else 0.0
+        p_inject = min(MAX_INJECT_FRACTION, max(0.0, 1.0 - self.w_fast / self.w_slow)) if self.w_slow > 0 else 0.0
         inject = self.rng.random(n) < p_inject
         if inject.any():
             new[inject] = self.field.random_free_poses(int(inject.sum()), self.rng)
@@ -264,16 +267,23 @@ class ParticleFilter:
 
     # ---------------------------------------------------------------- output
     def estimate(self) -> Estimate:
-        w = self.weights
-        x = float(np.dot(w, self.particles[:, 0]))
-        y = float(np.dot(w, self.particles[:, 1]))
-        cs = float(np.dot(w, np.cos(self.particles[:, 2])))
-        sn = float(np.dot(w, np.sin(self.particles[:, 2])))
-        theta = math.atan2(sn, cs)
-        d = self.particles - np.array([x, y, theta])
-        d[:, 2] = wrap_angles(d[:, 2])
-        cov = (d * w[:, None]).T @ d
-        return Estimate(x, y, theta, tuple(float(v) for v in cov.ravel()))
+        """Mean and covariance of the heaviest cluster (as AMCL reports its best cluster, so
+        injected random particles and far-away hypotheses do not drag the pose)."""
+        p, w = self.particles, self.weights
+        cells = np.floor(p[:, :2] / CLUSTER_CELL_M).astype(np.int64)
+        _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+        inverse = inverse.ravel()
+        mass = np.bincount(inverse, weights=w, minlength=len(counts))
+        best = inverse == int(np.argmax(mass))
+        centre = np.average(p[best, :2], axis=0, weights=w[best] + 1e-300)
+        near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) <= CLUSTER_RADIUS_M
+        return _weighted_pose(p[near], w[near])
+
+    def spread_m(self) -> float:
+        """Root of the xy variance of the whole cloud (m): small once the filter has converged."""
+        p, w = self.particles, self.weights
+        mx, my = float(np.dot(w, p[:, 0])), float(np.dot(w, p[:, 1]))
+        return math.sqrt(float(np.dot(w, (p[:, 0] - mx) ** 2 + (p[:, 1] - my) ** 2)))
 
     def pose_at(self, odom: tuple[float, float, float]) -> tuple[float, float, float]:
         """The estimate carried forward by the odometry since the last filter update."""
@@ -285,6 +295,16 @@ class ParticleFilter:
     @property
     def count(self) -> int:
         return len(self.particles)
+
+
+def _weighted_pose(p: np.ndarray, w: np.ndarray) -> Estimate:
+    w = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
+    x, y = float(np.dot(w, p[:, 0])), float(np.dot(w, p[:, 1]))
+    theta = math.atan2(float(np.dot(w, np.sin(p[:, 2]))), float(np.dot(w, np.cos(p[:, 2]))))
+    d = p - np.array([x, y, theta])
+    d[:, 2] = wrap_angles(d[:, 2])
+    cov = (d * w[:, None]).T @ d
+    return Estimate(x, y, theta, tuple(float(v) for v in cov.ravel()))
 
 
 def scan_fit(field: LikelihoodField, pose: tuple[float, float, float], sensor: tuple[float, float, float],

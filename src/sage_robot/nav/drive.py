@@ -46,7 +46,9 @@ WATCH_AHEAD_M = 8.0  # how much of the intended path must be free to go on (m)
 SPIN_SPEED_RADPS = 0.6
 RELOC_SPIN_RADPS = 0.4
 LOST_CONFIRM_S = 1.0  # health must say "lost" this long before the robot stops (s)
-RELOCALIZED_CONFIRM_S = 2.0  # and "not lost" this long to count as relocalized (s)
+RELOCALIZED_CONFIRM_S = 2.0  # and fit well this long to count as relocalized (s)
+RELOCALIZED_SCORE = 0.75  # health score needed to count as relocalized (0..1)
+RELOCALIZED_SPREAD_M = 0.5  # and the particle cloud must have shrunk to this (m)
 ETA_MIN_SPEED_MPS = 0.3
 KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
 
@@ -272,7 +274,8 @@ class GoalRun:
         while self.clock.now() < deadline:
             node.command(0.0, RELOC_SPIN_RADPS)
             await self.clock.sleep(self.dt)
-            if node.lost():
+            h = node.health
+            if h is None or h.lost or h.score < RELOCALIZED_SCORE or h.spread_m > RELOCALIZED_SPREAD_M:
                 good_since = None
             elif good_since is None:
                 good_since = self.clock.now()

@@ -143,7 +143,7 @@ class LocalizationNode(Node):
             self._scores.append(fit)
         score = float(np.mean(self._scores)) if self._scores else 0.0
         lost = len(self._scores) > 0 and score < nav.lost_below
-        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count)
+        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count, round(self.pf.spread_m(), 3))
         self.bus.publish(topics.LOC_HEALTH, self.health)
 
     async def teardown(self) -> None:

@@ -101,3 +101,4 @@ class LocalizationHealth:
     score: float
     lost: bool
     particles: int = 0
+    spread_m: float = 0.0  # root xy variance of the whole particle cloud (m); small = converged
