@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 import yaml
-from .nav_raycast import RANGE_MAX_M, RANGE_MIN_M, beam_angles, cast
 from scipy import ndimage
 
 from sage_robot.core import topics
@@ -28,6 +27,8 @@ from sage_robot.core.geometry import compose, wrap_angle
 from sage_robot.core.mapio import write_map
 from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D, Twist
 from sage_robot.core.node import NodeContext
+
+from .nav_raycast import RANGE_MAX_M, RANGE_MIN_M, beam_angles, cast
 
 STEP_S = 0.05  # physics step (s)
 SCAN_EVERY = 2  # steps per scan: 10 Hz

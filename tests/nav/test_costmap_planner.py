@@ -6,11 +6,12 @@ import math
 
 import numpy as np
 import pytest
-from .nav_grids import draw, room
 
 from sage_robot.core.mapio import read_map
 from sage_robot.nav.costmap import INSCRIBED, LETHAL, MAX_NON_OBSTACLE, NO_INFORMATION, Costmap, inflate
 from sage_robot.nav.planner import NoPath, path_length, plan
+
+from .nav_grids import draw, room
 
 CORRIDOR = """
 ####################

@@ -6,8 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from .nav_grids import draw
-from .nav_raycast import RANGE_MAX_M, beam_angles, cast
 
 from sage_robot.core.geometry import wrap_angle
 from sage_robot.nav.amcl import ParticleFilter, kld_count, sample_odometry, scan_fit
@@ -15,6 +13,9 @@ from sage_robot.nav.controller import ControllerParams, PurePursuit
 from sage_robot.nav.costmap import Costmap
 from sage_robot.nav.ekf import YawRateEkf
 from sage_robot.nav.planner import plan
+
+from .nav_grids import draw
+from .nav_raycast import RANGE_MAX_M, beam_angles, cast
 
 # An L-shaped floor with a pillar and alcoves: no two places look the same to a lidar.
 FLOOR = """

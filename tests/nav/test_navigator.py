@@ -5,13 +5,13 @@ from __future__ import annotations
 import asyncio
 import math
 
-from .nav_grids import draw
-from .nav_sim import running, settings_for, wait_until, write_building
-
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalStatus
 from sage_robot.core.msgs import Event, Pose2D, Text
 from sage_robot.core.msgs.nav import NavigateGoal, NavState, PlaceList, TourGoal
+
+from .nav_grids import draw
+from .nav_sim import running, settings_for, wait_until, write_building
 
 # Two rooms joined by a corridor; 0.5 m per character.
 NARROW = """

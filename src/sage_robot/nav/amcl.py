@@ -257,7 +257,9 @@ class ParticleFilter:
         positions = (self.rng.random() + np.arange(n)) / n
         idx = np.minimum(np.searchsorted(np.cumsum(self.weights), positions), n_old - 1)
         new = self.particles[idx]
-        p_inject = min(MAX_INJECT_FRACTION, max(0.0, 1.0 - self.w_fast / self.w_slow)) if self.w_slow > 0 else 0.0
+        p_inject = 0.0
+        if self.w_slow > 0:
+            p_inject = min(MAX_INJECT_FRACTION, max(0.0, 1.0 - self.w_fast / self.w_slow))
         inject = self.rng.random(n) < p_inject
         if inject.any():
             new[inject] = self.field.random_free_poses(int(inject.sum()), self.rng)
