@@ -234,3 +234,27 @@ async def test_arrival_event_without_endpoint_uses_the_fallback_line(bus, server
     brain = make_brain(bus, server)
     result = await asyncio.wait_for(brain.react("You have arrived.", "Here we are at the cafe."), WAIT_S)
     assert result.sentences == ["Here we are at the cafe."] and result.fell_back
+
+
+async def test_slow_endpoint_times_out_and_falls_back(bus, server) -> None:
+    server.add(Stream(text_chunks("Too slow."), delay_s=1.0))
+    brain = make_brain(bus, server, timeout_s=0.3, max_retries=0)
+    result = await respond(brain, "hello")
+    assert result.fell_back and "Timeout" in result.error and result.sentences[0] == ENDPOINT_DOWN
+
+
+async def test_api_key_from_the_key_file_or_a_placeholder(bus, server, tmp_path, monkeypatch) -> None:
+    monkeypatch.delenv("SAGE_TEST_LLM_KEY", raising=False)
+    keys = tmp_path / "keys.env"
+    keys.write_text("SAGE_TEST_LLM_KEY=sk-from-file\n")
+    keys.chmod(0o600)
+    server.add(say("One."), say("Two."), say("Three."))
+    await respond(make_brain(bus, server, api_key_env="SAGE_TEST_LLM_KEY"), "hi")
+    settings = Settings.model_validate(
+        {"llm": {"base_url": server.base_url, "api_key_env": "SAGE_TEST_LLM_KEY"}, "secrets_file": str(keys)}
+    )
+    with_file = LlmBrain(settings, make_tools(bus, settings), bus.clock)
+    await respond(with_file, "hi")
+    monkeypatch.setenv("SAGE_TEST_LLM_KEY", "sk-from-env")
+    await respond(LlmBrain(settings, make_tools(bus, settings), bus.clock), "hi")
+    assert server.auth == ["Bearer not-needed", "Bearer sk-from-file", "Bearer sk-from-env"]

@@ -98,6 +98,7 @@ class ScriptedServer:
         self.script: list[Stream | Status] = list(script or [])
         self.requests: list[dict[str, Any]] = []
         self.search_requests: list[tuple[str, dict[str, Any]]] = []
+        self.auth: list[str] = []  # the Authorization header of each completion request
         self.search_reply: dict[str, Any] = {"answer": "", "results": []}
         self.chunks_sent = 0  # over all streams, so a test can tell "still streaming"
         self.base_url = ""
@@ -136,6 +137,7 @@ class ScriptedServer:
         from aiohttp import web
 
         self.requests.append(await request.json())
+        self.auth.append(request.headers.get("Authorization", ""))
         if not self.script:
             return web.json_response({"error": {"message": "script exhausted"}}, status=500)
         reply = self.script.pop(0)
