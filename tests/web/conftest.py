@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import json
 import os
 import shutil
 import threading
@@ -29,6 +30,7 @@ from sage_robot.app.runtime import make_context, run_launcher
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalContext
 from sage_robot.core.config import load_profile
+from sage_robot.core.errors import ConfigError
 from sage_robot.core.mapio import read_map
 from sage_robot.core.msgs import OccupancyGrid, Odometry, Pose2D, Text
 from sage_robot.core.msgs.nav import NavigateGoal, NavigateResult
@@ -83,6 +85,7 @@ class SimRobot:
         self.goals: list[NavigateGoal] = []
         self.questions: list[str] = []
         self.stand_ins: list[str] = []
+        self.missing: list[str] = []
         self.password = PASSWORD
         self.artifacts = artifacts_dir()
         self.thread = threading.Thread(target=self._thread, name="sim-robot", daemon=True)
@@ -128,7 +131,12 @@ class SimRobot:
         self.bus = self.ctx.bus
         critical = dict(PROFILES["sim"])
         wanted = [*(n for n in WORLD_NODES if n in NODES), "mcu_sim", "serial_bridge", "web"]
-        specs = [NodeSpec(n, node_class(n), critical.get(n, False)) for n in wanted]
+        specs = []
+        for name in wanted:
+            try:
+                specs.append(NodeSpec(name, node_class(name), critical.get(name, False)))
+            except ConfigError:  # registered but its module has not landed yet
+                self.missing.append(name)
         self.node_names = [s.name for s in specs]
 
         async def after_start(launcher: Any) -> None:
@@ -151,6 +159,8 @@ class SimRobot:
                     break
                 await asyncio.sleep(0.05)
             self.url = self.ctx.resources["web_url"]
+            report = {"nodes": self.node_names, "stand_ins": self.stand_ins, "not_landed": self.missing}
+            (self.artifacts / "run.json").write_text(json.dumps(report, indent=1))
             self.ready.set()
 
         try:

@@ -284,6 +284,8 @@ def test_admin_adds_a_place_by_clicking_the_map(operator: Any, robot: Any) -> No
     page.fill("#p-desc", "the bright middle of the room")
     page.fill("#p-aliases", "the atrium, middle")
     page.click("#add-at-point")
+    page.wait_for_function("document.getElementById('place-msg').textContent.length > 0")
+    assert "added ATRIUM" in (page.text_content("#place-msg") or ""), page.text_content("#place-msg")
     page.wait_for_selector("#places td:has-text('ATRIUM')", timeout=WAIT_S * 1000)
     text = (robot.tmp / "waypoints.yaml").read_text()
     assert "ATRIUM" in text and "the atrium" in text

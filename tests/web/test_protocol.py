@@ -182,6 +182,8 @@ def test_admin_places_are_validated_and_written(robot: Any, client: httpx.Client
                        headers=h)  # fmt: skip
     assert resp.status_code == 200, resp.text
     assert "HERE_NOW" in (robot.tmp / "waypoints.yaml").read_text()
+    listed = client.get("/api/admin/places", headers=h).json()["places"]
+    assert [p["name"] for p in listed][-1] == "HERE_NOW"
     resp = client.post("/api/admin/places", json={"name": "HERE_NOW", "at_robot": True}, headers=h)
     assert resp.status_code == 409
     logs = client.get("/api/admin/logs?limit=50", headers=h).json()["records"]

@@ -13,12 +13,13 @@ from typing import Any
 
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request
 
+from sage_robot.core import topics
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.log import RECENT, get_logger
-from sage_robot.core.msgs import Pose2D
+from sage_robot.core.msgs import Event, Pose2D
 from sage_robot.core.paths import package_data, waypoints_yaml
 from sage_robot.core.places import Place, Places, load_places, validate_places, write_places
-from sage_robot.web.api import _pose, list_places
+from sage_robot.web.api import _place_dict, _pose
 from sage_robot.web.common import WebState, json_body, require_operator, state_of
 
 router = APIRouter(dependencies=[Depends(require_operator)])
@@ -26,6 +27,7 @@ PLACE_NAME = re.compile(r"^[A-Z0-9][A-Z0-9_]{0,47}$")  # the seed's waypoint nam
 MAX_TEXT = 500  # characters of a description
 MAX_ALIASES = 10
 LOG_LIMIT_MAX = 500
+PLACES_CHANGED = "places_changed"  # Event kind published after the waypoints file is rewritten
 
 _log = get_logger("web")
 _places_lock = asyncio.Lock()
@@ -93,13 +95,36 @@ async def add_place(request: Request) -> dict[str, Any]:
         except ConfigError as exc:
             raise HTTPException(status_code=422, detail=str(exc)) from None
     _log.info("place added", place=place.name, x=round(pose.x, 2), y=round(pose.y, 2), file=str(path))
-    return {"ok": True, "file": str(path), "places": await list_places(request)}
+    # Navigation reads the waypoints file when it starts; tell whoever listens that it changed.
+    st.node.bus.publish(
+        topics.EVENTS,
+        Event(st.node.clock.now(), "web", PLACES_CHANGED, f"{place.name} added", {"file": str(path)}),
+    )
+    return {"ok": True, "file": str(path), "places": [_place_json(p) for p in updated]}
+
+
+@router.get("/api/admin/places")
+async def file_places(request: Request) -> dict[str, Any]:
+    """The places in the waypoints file (what the admin edits; navigation may lag until it reloads)."""
+    path = waypoints_yaml(state_of(request).node.settings)
+    try:
+        places = await asyncio.to_thread(load_places, path)
+    except ConfigError as exc:
+        raise HTTPException(status_code=422, detail=str(exc)) from None
+    return {"file": str(path), "places": [_place_json(p) for p in places]}
+
+
+def _place_json(p: Place) -> dict[str, Any]:
+    return _place_dict(p.name, p.pose, p.description, p.aliases)
 
 
 def _robot_pose(st: WebState) -> Pose2D:
     pose = st.hub.robot_pose
-    if pose is None:
-        raise HTTPException(status_code=409, detail="the robot's pose is not known yet")
+    if pose is None or st.hub.robot_frame != "map":
+        raise HTTPException(
+            status_code=409,
+            detail="the robot is not localized on the map yet; click the map to give x, y instead",
+        )
     return Pose2D(*pose)
 
 

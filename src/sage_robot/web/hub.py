@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sage_robot.core import topics
+from sage_robot.core.geometry import compose, inverse
 from sage_robot.core.msgs import (
     BatteryState,
     CompressedImage,
@@ -56,7 +57,6 @@ MIN_INTERVAL_S: dict[str, float] = {
 EVENTS_KEPT = 50  # recent events shown on a newly opened page
 QUEUE_KEPT = 100  # events and audio chunks queued per client before the oldest is dropped
 AUDIO_HEADER = struct.Struct("<I")  # binary audio message: sample rate (Hz), then int16 LE PCM
-AMCL_FRESH_S = 2.0  # prefer the AMCL pose over odometry while it is this recent (clock s)
 
 
 @dataclass(eq=False)
@@ -89,7 +89,8 @@ class Hub:
         self.map_version = 0
         self.map_grid: OccupancyGrid | None = None
         self._map_png: tuple[int, bytes] | None = None
-        self._amcl_t: float | None = None
+        self._odom: tuple[float, float, float] | None = None
+        self._map_odom: tuple[float, float, float] | None = None  # pose of odom in map
         self.robot_pose: tuple[float, float, float] | None = None
         self.robot_frame = ""
         mount = self.settings.robot.lidar
@@ -105,6 +106,7 @@ class Hub:
         sub(topics.DOA, Doa, self._on_doa)
         sub(topics.ODOM, Odometry, self._on_odom)
         sub(topics.AMCL_POSE, PoseWithCovariance, self._on_amcl)
+        sub(topics.MAP_ODOM, PoseStamped, self._on_map_odom)
         sub(topics.SCAN, LaserScan, self._on_scan, maxsize=2)
         sub(topics.PLAN, Path, self._on_plan)
         sub(topics.GOAL_POSE, PoseStamped, self._on_goal)
@@ -176,12 +178,19 @@ class Hub:
 
     def _on_odom(self, msg: Odometry) -> None:
         self.set("odom", {"type": "odom", "x": msg.pose.x, "y": msg.pose.y, "v": msg.twist.linear_x})
-        fresh_amcl = self._amcl_t is not None and self.clock.now() - self._amcl_t < AMCL_FRESH_S
-        if not fresh_amcl:
-            self._set_pose(msg.pose.as_tuple(), msg.frame_id)
+        self._odom = msg.pose.as_tuple()
+        if self._map_odom is None:
+            self._set_pose(self._odom, msg.frame_id)
+        else:
+            self._set_pose(compose(self._map_odom, self._odom), "map")
+
+    def _on_map_odom(self, msg: PoseStamped) -> None:
+        """Localization's map->odom correction: odometry then gives a fresh map pose at its rate."""
+        self._map_odom = msg.pose.as_tuple()
 
     def _on_amcl(self, msg: PoseWithCovariance) -> None:
-        self._amcl_t = self.clock.now()
+        if self._odom is not None:
+            self._map_odom = compose(msg.pose.as_tuple(), inverse(self._odom))
         self._set_pose(msg.pose.as_tuple(), msg.frame_id or "map")
 
     def _set_pose(self, pose: tuple[float, float, float], frame: str) -> None:

@@ -5,7 +5,7 @@ import { LiveMap } from "./livemap.js";
 const REFRESH_MS = 3000;
 
 async function loadPlaces() {
-  const { ok, data } = await api("/api/places");
+  const { ok, data } = await api("/api/admin/places");
   if (!ok) return;
   const body = $("places");
   body.replaceChildren();
@@ -24,7 +24,9 @@ async function addPlace(extra) {
   };
   const { ok, data } = await api("/api/admin/places", body);
   $("place-msg").className = ok ? "ok" : "error";
-  $("place-msg").textContent = ok ? `added ${body.name} to ${data.file}` : data.error;
+  $("place-msg").textContent = ok
+    ? `added ${body.name} to ${data.file} (navigation reads the file when it starts)`
+    : data.error;
   if (ok) loadPlaces();
 }
 

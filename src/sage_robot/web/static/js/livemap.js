@@ -147,6 +147,11 @@ export class LiveMap {
     }
     if (L.pose) this.drawRobot(L.pose, v);
     g.font = "13px system-ui";
+    const notes = (L.loc ? 1 : 0) + (L.pose && L.pose.frame !== "map" ? 1 : 0);
+    if (notes) {
+      g.fillStyle = "rgba(16, 21, 28, 0.8)";
+      g.fillRect(2, 4, 330, 18 * notes + 4);
+    }
     if (L.loc) {
       g.fillStyle = L.loc.lost ? "#f85149" : "#e8eef5";
       g.fillText(`localization ${(L.loc.score * 100).toFixed(0)} %${L.loc.lost ? " · LOST" : ""}`, 8, 18);
