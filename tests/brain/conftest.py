@@ -27,6 +27,7 @@ from sage_robot.core.msgs.nav import (
     NavState,
     PlaceInfo,
     PlaceList,
+    TourFeedback,
     TourGoal,
     TourResult,
     WhereAmI,
@@ -94,6 +95,7 @@ class FakeNav:
 
     async def _tour(self, goal: TourGoal, ctx: GoalContext) -> TourResult:
         self.tours.append(goal.places)
+        ctx.feedback(TourFeedback(0, goal.places[0], NavState.DRIVING))
         await asyncio.Event().wait()
         return TourResult((), True)
 

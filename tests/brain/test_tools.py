@@ -85,7 +85,8 @@ async def test_where_am_i_battery_and_places(tools, nav) -> None:
 async def test_start_tour_by_places_or_theme(tools, nav) -> None:
     by_list = await tools.call("start_tour", {"places": ["the cafe", "clean rum"]})
     assert by_list.result.data["stops"] == ["GUELLY_DELLY", "CLEAN_ROOM"]
-    await until(lambda: nav.tours)
+    await until(lambda: nav.tours and tools.ctx.robot.nav.state == "driving")
+    assert tools.ctx.robot.nav.describe() == "on a tour, heading to GUELLY_DELLY (driving)"
     robots = await tools.call("start_tour", {"theme": "robots"})
     assert robots.result.data["stops"] == ["VALPO_ROBOTICS"]
     bad = await tools.call("start_tour", {"places": ["atlantis"]})

@@ -64,7 +64,8 @@ class BrainNode(Node):
             await self.robot.close()
 
     def stats(self) -> dict[str, Any]:
-        return {"brain": getattr(self, "brain", None) and self.brain.kind, "turns": getattr(self, "turns", 0)}
+        brain = getattr(self, "brain", None)  # None before setup
+        return {"brain": brain.kind if brain else "", "turns": getattr(self, "turns", 0)}
 
     def _idle_check(self) -> None:
         now = self.clock.now()

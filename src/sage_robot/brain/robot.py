@@ -25,6 +25,7 @@ from sage_robot.core.msgs.nav import (
     NavigateFeedback,
     NavigateGoal,
     PlaceList,
+    TourFeedback,
     TourGoal,
     WhereAmI,
 )
@@ -173,9 +174,8 @@ class RobotLink:
                 self.nav.state = fb.state.value
                 self.nav.distance_remaining_m = fb.distance_remaining_m
                 self.nav.target = fb.place or self.nav.target
-            elif hasattr(fb, "place") and hasattr(fb, "state"):  # TourFeedback
-                self.nav.target = str(fb.place)
-                self.nav.state = str(getattr(fb.state, "value", fb.state))
+            elif isinstance(fb, TourFeedback):
+                self.nav.target, self.nav.state = fb.place, fb.state.value
         result = await handle.result()
         if self._goal is not handle:
             return
