@@ -21,6 +21,7 @@ PROFILES: dict[str, list[tuple[str, bool]]] = {
         ("web", True),
         ("kb", False),
         ("brain", False),
+        ("voice", False),
     ],
     # The real robot on a tour (the seed's start_robot.sh).
     "tour": [
@@ -36,6 +37,7 @@ PROFILES: dict[str, list[tuple[str, bool]]] = {
         ("web", True),
         ("kb", False),
         ("brain", False),
+        ("voice", False),
     ],
     # The real robot building a map (the seed's slam_robot.sh).
     "slam": [("heartbeat", False), ("foxglove", False), ("lidar", False), ("camera", False), ("web", True),

@@ -26,6 +26,7 @@ NODES: dict[str, str] = {
     "web": "sage_robot.web.node:WebNode",
     "brain": "sage_robot.brain.node:BrainNode",
     "slam": "sage_robot.nav.slam.node:SlamNode",
+    "voice": "sage_robot.voice.node:VoiceNode",
 }
 
 # Which extra provides a node's module, for the message when its import fails.

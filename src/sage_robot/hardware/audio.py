@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import queue
+import time as _time
 from typing import Any, Protocol
 
 import numpy as np
@@ -83,7 +84,8 @@ class SoundDeviceMicrophone:
         if channel >= channels:
             raise DeviceNotConnectedError(f"{info['name']} has {channels} channels, not {channel + 1}")
         self.rate = int(info["default_samplerate"])
-        self._queue: queue.Queue[np.ndarray] = queue.Queue(MIC_QUEUE_BLOCKS)
+        self._queue: queue.Queue[tuple[np.ndarray, float]] = queue.Queue(MIC_QUEUE_BLOCKS)
+        self.frame_time: float | None = None  # wall time the last frame read was captured
         self._pending = np.zeros(0, dtype=np.int16)
         self.overflows = 0
         import soxr
@@ -99,7 +101,7 @@ class SoundDeviceMicrophone:
             raise DeviceNotConnectedError(f"cannot open microphone {info['name']}: {exc}") from None
 
     def _callback(self, indata: np.ndarray, frames: int, time: Any, status: Any) -> None:
-        block = np.ascontiguousarray(indata[:, self.channel])
+        block = (np.ascontiguousarray(indata[:, self.channel]), _time.time())
         try:
             self._queue.put_nowait(block)
         except queue.Full:
@@ -111,7 +113,7 @@ class SoundDeviceMicrophone:
     async def read(self) -> np.ndarray:
         while len(self._pending) < FRAME_SAMPLES:
             try:
-                block = await asyncio.to_thread(self._queue.get, True, READ_TIMEOUT_S)
+                block, self.frame_time = await asyncio.to_thread(self._queue.get, True, READ_TIMEOUT_S)
             except queue.Empty:
                 raise DeviceNotConnectedError("the microphone stopped delivering audio") from None
             out = self._resampler.resample_chunk(block)

@@ -54,6 +54,7 @@ class SimMicrophone:
         self.frames = 0
         self.closed = False
         self.waiting = False  # True while read() waits for its frame's time
+        self.frame_time: float | None = None  # clock time the last frame read ends
 
     async def lockstep(self, dt: float = 0.0, poll_s: float = 0.0005) -> None:
         """A SimClock ``on_step`` hook: hold the clock until the reader asked for its next
@@ -124,6 +125,7 @@ class SimMicrophone:
         x[:k] += self._echo[:k]
         self._echo = self._echo[k:]
         self._echo_t = (self._echo_t or 0.0) + FRAME_S
+        self.frame_time = self._t0 + self.frames * FRAME_S
         return np.clip(np.round(x), -32768, 32767).astype(np.int16)
 
     def close(self) -> None:

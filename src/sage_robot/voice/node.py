@@ -90,23 +90,27 @@ class VoiceNode(Node):
         if not self.vs.enabled:
             self.log.info("voice disabled in the profile")
             return
+        self.spawn(self._start_pipeline(), name="voice.pipeline")
+
+    async def _start_pipeline(self) -> None:
+        """Load the models off the loop (seconds), then run the pipeline forever."""
         try:
             models = await asyncio.to_thread(VoiceModels.load, self.vs)
-            self._open_audio(models)
+            self._open_audio()
         except (ConfigError, DeviceNotConnectedError) as exc:
             self.log.error("voice pipeline unavailable", error=str(exc))
             self.bus.publish(UI_STATE, UiState(Phase.ERROR, error_msg=f"voice: {exc}"))
             return
+        self.models = models
         self.pipeline = build_pipeline(self.bus, self.clock, self.vs, models, self._mic,
                                        self._speaker)  # fmt: skip
-        self.models = models
-        self.spawn(self.pipeline.run(), name="voice.pipeline")
         if self.simulated:
             self.subscribe(SIM_VISITOR_SAY, Text, self._visitor_says)
         self.log.info("voice ready", source="sim" if self.simulated else "mic",
                       wake=",".join(self.vs.wake_models), tts=self.vs.tts_engine)  # fmt: skip
+        await self.pipeline.run()
 
-    def _open_audio(self, models: VoiceModels) -> None:
+    def _open_audio(self) -> None:
         if self.simulated:
             from sage_robot.sim.audio import SimMicrophone, SimSpeaker
 

@@ -131,10 +131,14 @@ class VoicePipeline:
         return detections, prob
 
     async def process_frame(self, frame: np.ndarray) -> None:
+        # When the frame was captured (a mic that lags still gets its echo right).
+        frame_t = getattr(self.mic, "frame_time", None) or self.clock.now()
         detections, prob = await asyncio.to_thread(self._analyse, frame)
-        detections = [d for d in detections if not self._own_voice(d)]
+        detections = [d for d in detections if not self._own_voice(d, frame_t)]
         if detections:
             self._on_wake(detections[0])
+        if self.state is State.LISTENING and self.mouth.audible(frame_t):
+            return  # the robot's own voice: not the visitor's utterance
         if self.state is State.LISTENING:
             if self._skip_s > 0:
                 self._skip_s -= len(frame) / 16000
@@ -143,9 +147,9 @@ class VoicePipeline:
             if utt is not None:
                 self._on_utterance(utt)
 
-    def _own_voice(self, det: Detection) -> bool:
+    def _own_voice(self, det: Detection, frame_t: float) -> bool:
         t = self.mouth.last_self_wake
-        if t is not None and self.clock.now() - t <= SELF_ECHO_WINDOW_S:
+        if t is not None and abs(frame_t - t) <= SELF_ECHO_WINDOW_S:
             self.self_echoes_ignored += 1
             self.log.info("ignored own voice", model=det.model, score=round(det.score, 2))
             return True
@@ -153,8 +157,8 @@ class VoicePipeline:
 
     def _on_wake(self, det: Detection) -> None:
         self.detections.append(det)
-        if self.state is State.LISTENING and self.recorder.started:
-            return  # already recording a visitor
+        if self.state is State.LISTENING and self.recorder.started and not self._follow_up:
+            return  # already recording what the visitor says after the wake word
         busy = self.state is State.BUSY or self.mouth.speaking
         if busy:
             self.barge_ins += 1
@@ -272,7 +276,7 @@ class VoicePipeline:
         self.latencies.append(msg)
         self.bus.publish(TURN_LATENCY, msg)
         self.log.info("turn latency", turn=msg.turn, end_of_speech=round(msg.end_of_speech, 3),
-                      stt_done=round(msg.stt_done, 3), first_token=round(msg.first_token, 3),
+                      stt_done=round(msg.stt_done, 3), first_sentence=round(msg.first_token, 3),
                       first_audio=round(msg.first_audio, 3),
                       reply_delay_s=round(msg.reply_delay_s, 3))  # fmt: skip
 

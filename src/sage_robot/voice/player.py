@@ -11,6 +11,7 @@ the microphone, while a visitor's wake word still interrupts (barge-in).
 from __future__ import annotations
 
 import asyncio
+from collections import deque
 from collections.abc import AsyncIterator, Callable
 from typing import Any
 
@@ -28,7 +29,22 @@ from sage_robot.voice.wake import WakeDetector
 BLOCK_S = 0.1  # playback block (s): the unit of AudioChunk, mouth updates and barge-in
 SYNTH_AHEAD = 3  # sentences synthesised ahead of the one playing
 SELF_WAKE_THRESHOLD = 0.3  # the robot's own speech scoring this counts as saying a wake word
+AUDIBLE_KEPT = 64  # playback intervals remembered for audible()
+ECHO_TAIL_S = 0.35  # the room still rings (and buffers drain) this long after the audio ends
+FIRST_CLAUSE_MIN_WORDS = 2  # the first spoken piece is at least this many words
 REFERENCE_PRIME_S = 1.0  # silence fed to the reference detector before each utterance (s)
+
+
+def first_clause(sentence: str) -> list[str]:
+    """Cut a long first sentence at its first comma, colon or semicolon (after a few words)."""
+    words = sentence.split()
+    if len(words) < FIRST_CLAUSE_MIN_WORDS * 2:
+        return [sentence]
+    for i, w in enumerate(words[FIRST_CLAUSE_MIN_WORDS - 1 : -FIRST_CLAUSE_MIN_WORDS],
+                          start=FIRST_CLAUSE_MIN_WORDS - 1):  # fmt: skip
+        if w.endswith((",", ":", ";")):
+            return [" ".join(words[: i + 1]), " ".join(words[i + 1 :])]
+    return [sentence]
 
 
 class Mouth:
@@ -51,6 +67,8 @@ class Mouth:
         self.utterances = 0
         self.last_self_wake: float | None = None  # clock time the robot "said" a wake word
         self.last_audio_end: float | None = None
+        self._play_end = 0.0  # clock time the audio handed to the speaker ends
+        self._heard: deque[tuple[float, float]] = deque(maxlen=AUDIBLE_KEPT)  # (start, end)
         self.sentences_spoken = 0
 
     async def say(
@@ -79,6 +97,7 @@ class Mouth:
                 await producer  # re-raise a synthesis error
             except asyncio.CancelledError:
                 self.speaker.abort()
+                self._cut_playback()
                 raise
             finally:
                 producer.cancel()
@@ -100,9 +119,14 @@ class Mouth:
     async def _synthesise(
         self, sentences: AsyncIterator[str], queue: asyncio.Queue[tuple[np.ndarray, int] | None]
     ) -> None:
+        first = True
         try:
             async for text in sentences:
-                for sentence in self.speech.sentences(text):
+                parts = self.speech.sentences(text)
+                if first and parts:  # a short first piece: the reply starts sooner
+                    parts = [*first_clause(parts[0]), *parts[1:]]
+                first = False
+                for sentence in parts:
                     pcm = await asyncio.to_thread(self.speech.engine.synthesize_sentence, sentence)
                     if len(pcm):
                         await queue.put((pcm, self.speech.sample_rate))
@@ -119,18 +143,37 @@ class Mouth:
             self._publish(block, rate, opening)
             if self.on_viseme:
                 self.on_viseme(round(opening, 2))
+            start = max(self.clock.now(), self._play_end)
+            self._play_end = start + len(block) / rate
+            self._remember(start, self._play_end)
             if self.reference is not None:
-                await asyncio.to_thread(self._hear_self, block, rate)
+                await asyncio.to_thread(self._hear_self, block, rate, start)
             if on_first is not None:
                 on_first()
                 on_first = None
             await self.speaker.play(block, rate)
 
-    def _hear_self(self, block: np.ndarray, rate: int) -> None:
+    def _remember(self, start: float, end: float) -> None:
+        if self._heard and start <= self._heard[-1][1] + 1e-6:
+            self._heard[-1] = (self._heard[-1][0], end)
+        else:
+            self._heard.append((start, end))
+
+    def _cut_playback(self) -> None:
+        now = self.clock.now()
+        self._play_end = now
+        if self._heard and self._heard[-1][1] > now:
+            self._heard[-1] = (self._heard[-1][0], now)
+
+    def audible(self, t: float, tail_s: float = ECHO_TAIL_S) -> bool:
+        """Was the robot's own voice in the room at clock time ``t`` (a mic frame's time)?"""
+        return any(s <= t <= e + tail_s for s, e in reversed(self._heard))
+
+    def _hear_self(self, block: np.ndarray, rate: int, start: float) -> None:
         assert self.reference is not None
         self.reference.feed(resample(block, rate, SAMPLE_RATE))
         if max(self.reference.last_scores.values(), default=0.0) >= SELF_WAKE_THRESHOLD:
-            self.last_self_wake = self.clock.now()
+            self.last_self_wake = start + len(block) / rate
 
     def _publish(self, block: np.ndarray, rate: int, viseme: float, final: bool = False) -> None:
         msg = AudioChunk(self.clock.now(), int(rate), block.astype("<i2").tobytes(),

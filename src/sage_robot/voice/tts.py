@@ -75,16 +75,18 @@ class PiperEngine:
             self._voice = PiperVoice.load(model, config)
         except Exception as exc:  # onnxruntime or JSON errors on a broken voice file
             raise ConfigError(f"cannot load Piper voice {voice!r}: {exc}") from None
-        if deterministic:  # no generator noise: the same text gives the same samples
-            self._config = SynthesisConfig(noise_scale=0.0, noise_w_scale=0.0)
-        else:
-            self._config = SynthesisConfig()
+        self._make_config = SynthesisConfig
+        self.deterministic = deterministic
+        self.length_scale: float | None = None  # > 1 speaks slower; None = the voice's own
         self.sample_rate = int(self._voice.config.sample_rate)
         self._lock = threading.Lock()
 
     def synthesize_sentence(self, text: str) -> np.ndarray:
+        noise = 0.0 if self.deterministic else None  # None: the voice's own noise scales
+        config = self._make_config(length_scale=self.length_scale, noise_scale=noise,
+                                   noise_w_scale=noise)  # fmt: skip
         with self._lock:
-            chunks = [c.audio_int16_array for c in self._voice.synthesize(text, self._config)]
+            chunks = [c.audio_int16_array for c in self._voice.synthesize(text, config)]
         return np.concatenate(chunks).astype(np.int16) if chunks else np.zeros(0, np.int16)
 
 
@@ -93,17 +95,17 @@ class EspeakEngine:
 
     name = "espeak"
 
-    def __init__(self, voice: str = "en-us", deterministic: bool = True) -> None:
+    def __init__(self, voice: str = "en-us", words_per_min: int = ESPEAK_WORDS_PER_MIN) -> None:
         exe = shutil.which("espeak-ng") or shutil.which("espeak")
         if exe is None:
             raise ConfigError("espeak-ng is not installed (apt-get install espeak-ng)")
-        self._exe, self._voice = exe, voice
+        self._exe, self._voice, self.words_per_min = exe, voice, words_per_min
         self.sample_rate = 22050  # espeak-ng's output rate
 
     def synthesize_sentence(self, text: str) -> np.ndarray:
         import io
 
-        cmd = [self._exe, "-v", self._voice, "-s", str(ESPEAK_WORDS_PER_MIN), "--stdout", text]
+        cmd = [self._exe, "-v", self._voice, "-s", str(self.words_per_min), "--stdout", text]
         try:
             out = subprocess.run(cmd, capture_output=True, timeout=ESPEAK_TIMEOUT_S, check=True)
         except (subprocess.SubprocessError, OSError) as exc:

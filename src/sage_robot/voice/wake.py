@@ -157,8 +157,11 @@ class WakeDetector:
         engine: WakeEngine,
         threshold: float = 0.6,
         refractory_s: float = DEFAULT_REFRACTORY_S,
+        keep_scores: bool = False,
     ) -> None:
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
+        self.keep_scores = keep_scores
+        self.scores: list[dict[str, float]] = []  # every frame's scores, with keep_scores
         self._framer = Framer(FRAME_SAMPLES)
         self.frames = 0
         self._last: dict[str, float] = {}
@@ -187,6 +190,8 @@ class WakeDetector:
         scores = self.engine.score(frame)
         self.frames += 1
         self.last_scores = scores
+        if self.keep_scores:
+            self.scores.append(scores)
         found = []
         t = self.time_s
         for name, s in scores.items():

@@ -1,0 +1,269 @@
+"""Voice: STT and TTS speed, reply latency with an echo brain, wake-word errors, CPU per frame.
+
+- STT real-time factor on real recordings (Debian's pocketsphinx-testdata) or Piper speech.
+- TTS real-time factor and time to the first sentence's audio.
+- End of speech → first audio: whole turns through the pipeline on the wall clock, with a
+  brain that echoes the question (the simulated room's mic and speaker).
+- Wake false rejects over synthesized "hey jarvis" (Piper at several speeds, espeak-ng
+  voices, clean and noisy) and false accepts over minutes of other speech and noise.
+- CPU per 80 ms frame (wake models + VAD).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import statistics
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RATE = 16000
+FRAME = 1280  # 80 ms
+POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")
+WAKE_PHRASES = ("Hey Jarvis.", "Hey Jarvis, where is the lab?")
+PIPER_SPEEDS = (0.8, 0.9, 1.0, 1.15, 1.3)  # length scales: < 1 faster
+ESPEAK_VOICES = ("en-us", "en-us+f3", "en-gb", "en-us+m3")
+ESPEAK_RATES = (140, 175)  # words per minute
+SNRS_DB = (None, 15.0, 5.0)  # clean, then white noise at these signal-to-noise ratios
+QUESTIONS = ("Where is the library?", "What time does the lab open?", "Who teaches robotics?",
+             "Can you take me to the cafe?", "How old is this building?")  # fmt: skip
+NEUTRAL = (
+    "Welcome to the engineering building.", "The robotics lab is on the first floor.",
+    "Please follow me to the next stop.", "This hallway leads to the lecture halls.",
+    "The cafe serves coffee until four in the afternoon.", "Students build rockets here.",
+    "Our senior design projects are on display.", "The elevator is to your left.",
+    "Mind the step as we enter the workshop.", "The library has quiet study rooms upstairs.",
+    "We have three machine shops and a clean room.", "Ask me anything about the college.",
+    "The dean's office is at the end of this corridor.", "Turn right after the glass doors.",
+    "Thank you for visiting, have a wonderful day.", "The solar car team meets on Tuesdays.",
+    "Hey, are you coming with us?", "Jars of paint are stored in the art room.",
+    "Travis and Harvey are working on the drone.", "Alex sat on the bench outside.",
+)  # fmt: skip
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--turns", type=int, default=6, help="pipeline turns for the reply latency")
+    p.add_argument("--fa-minutes", type=float, default=10.0, help="minutes of non-wake audio")
+    p.add_argument("--quick", action="store_true", help="small sizes (a smoke test)")
+
+
+def _noisy(x: np.ndarray, snr_db: float | None, rng: np.random.Generator) -> np.ndarray:
+    if snr_db is None:
+        return x
+    sig = float(np.sqrt(np.mean(x.astype(np.float64) ** 2))) + 1e-9
+    noise = rng.normal(0.0, sig / 10 ** (snr_db / 20), len(x))
+    return np.clip(x + noise, -32768, 32767).astype(np.int16)
+
+
+def _stt(stt: Any, speech: Any) -> dict[str, Any]:
+    from sage_robot.voice.audio_io import load_audio, resample
+
+    clips = [*sorted(POCKETSPHINX.glob("librivox/*.wav"))[:3], POCKETSPHINX / "goforward.raw"]
+    audio = [load_audio(c) for c in clips if c.is_file()]
+    if not audio:  # no test data installed: Piper speech instead
+        audio = [resample(speech.synthesize(q), speech.sample_rate, RATE) for q in QUESTIONS[:3]]
+    rtf = []
+    for pcm in audio:
+        r = stt.transcribe(pcm)
+        rtf.append(r.elapsed_s / r.duration_s)
+    return {"stt_rtf_median": round(statistics.median(rtf), 3), "stt_clips": len(rtf),
+            "stt_audio_s": round(sum(len(a) for a in audio) / RATE, 1)}  # fmt: skip
+
+
+def _tts(speech: Any) -> dict[str, Any]:
+    text = "Welcome to the engineering building. The robotics lab is on the first floor, " \
+           "past the glass doors. Please follow me and mind the step."  # fmt: skip
+    firsts, rtfs = [], []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        total = 0
+        for i, pcm in enumerate(speech.stream(text)):
+            if i == 0:
+                firsts.append(time.perf_counter() - t0)
+            total += len(pcm)
+        rtfs.append((time.perf_counter() - t0) / (total / speech.sample_rate))
+    return {"tts_rtf_median": round(statistics.median(rtfs), 3),
+            "tts_first_audio_s_median": round(statistics.median(firsts), 3)}  # fmt: skip
+
+
+def _frame_cpu(models: Any) -> dict[str, Any]:
+    from sage_robot.voice.wake import WakeDetector
+
+    rng = np.random.default_rng(3)
+    x = rng.normal(0, 300, FRAME * 200).astype(np.int16)
+    models.wake.reset()
+    det = WakeDetector(models.wake)
+    models.vad.reset()
+    c0, t0 = time.process_time(), time.perf_counter()
+    for i in range(200):
+        frame = x[i * FRAME : (i + 1) * FRAME]
+        det.feed_frame(frame)
+        models.vad.frame_probability(frame)
+    cpu_ms = (time.process_time() - c0) / 200 * 1000
+    wall_ms = (time.perf_counter() - t0) / 200 * 1000
+    return {"cpu_ms_per_80ms_frame": round(cpu_ms, 2), "wall_ms_per_80ms_frame": round(wall_ms, 2),
+            "cpu_share_of_realtime": round(cpu_ms / 80, 3)}  # fmt: skip
+
+
+def _wake_clips(speech: Any, quick: bool) -> list[tuple[str, np.ndarray]]:
+    from sage_robot.voice.audio_io import resample
+    from sage_robot.voice.tts import EspeakEngine
+
+    rng = np.random.default_rng(11)
+    clips = []
+    piper = speech.engine
+    speeds = PIPER_SPEEDS[:2] if quick else PIPER_SPEEDS
+    for speed in speeds:
+        piper.length_scale = speed
+        for phrase in WAKE_PHRASES:
+            pcm = resample(piper.synthesize_sentence(phrase), piper.sample_rate, RATE)
+            for snr in SNRS_DB:
+                clips.append((f"piper x{speed} {snr}dB {phrase}", _noisy(pcm, snr, rng)))
+    piper.length_scale = None
+    for voice in ESPEAK_VOICES[: 1 if quick else None]:
+        for wpm in ESPEAK_RATES:
+            es = EspeakEngine(voice, wpm)
+            pcm = resample(es.synthesize_sentence(WAKE_PHRASES[0]), es.sample_rate, RATE)
+            for snr in SNRS_DB:
+                clips.append((f"espeak {voice} {wpm}wpm {snr}dB", _noisy(pcm, snr, rng)))
+    return clips
+
+
+def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], thr: float) -> dict[str, Any]:
+    from sage_robot.voice.wake import WakeDetector
+
+    pad = np.zeros(RATE, dtype=np.int16)
+    missed = []
+    for name, pcm in clips:
+        models.wake.reset()
+        det = WakeDetector(models.wake, thr)
+        if not det.feed(np.concatenate([pad, pcm, pad])):
+            missed.append(name)
+    return {"wake_clips": len(clips), "wake_false_rejects": len(missed),
+            "wake_false_reject_rate": round(len(missed) / max(1, len(clips)), 3),
+            "wake_missed": missed[:10]}  # fmt: skip
+
+
+def _non_wake_audio(speech: Any, minutes: float) -> np.ndarray:
+    """Other speech (Piper, espeak-ng voices, real recordings) and noise, ``minutes`` long."""
+    from sage_robot.voice.audio_io import load_audio, resample
+    from sage_robot.voice.tts import EspeakEngine
+
+    rng = np.random.default_rng(5)
+    want = int(minutes * 60 * RATE)
+    parts: list[np.ndarray] = [load_audio(p) for p in sorted(POCKETSPHINX.glob("librivox/*.wav"))]
+    piper = speech.engine
+    for s in NEUTRAL:
+        parts.append(resample(piper.synthesize_sentence(s), piper.sample_rate, RATE))
+    voices = [EspeakEngine(v, r) for v in ESPEAK_VOICES for r in ESPEAK_RATES]
+    speech_parts = list(parts)
+    k = 0
+    while sum(len(p) for p in parts) < want * 0.8:
+        es = voices[k % len(voices)]
+        s = NEUTRAL[k % len(NEUTRAL)]
+        parts.append(resample(es.synthesize_sentence(s), es.sample_rate, RATE))
+        speech_parts.append(parts[-1])
+        k += 1
+    while sum(len(p) for p in parts) < want:  # noise: white, brown, and babble of voices
+        n = 5 * RATE
+        kind = len(parts) % 3
+        if kind == 0:
+            parts.append(rng.normal(0, 800, n).astype(np.int16))
+        elif kind == 1:
+            brown = np.cumsum(rng.normal(0, 60, n))
+            parts.append(np.clip(brown - np.mean(brown), -20000, 20000).astype(np.int16))
+        else:
+            babble = np.zeros(n)
+            for j in rng.choice(len(speech_parts), 3):
+                src = speech_parts[j][:n]
+                babble[: len(src)] += src * 0.4
+            parts.append(np.clip(babble, -32768, 32767).astype(np.int16))
+    gap = np.zeros(RATE // 2, dtype=np.int16)
+    return np.concatenate([x for p in parts for x in (p, gap)])[:want]
+
+
+def _false_accepts(models: Any, audio: np.ndarray, thr: float) -> dict[str, Any]:
+    from sage_robot.voice.wake import WakeDetector
+
+    models.wake.reset()
+    det = WakeDetector(models.wake, thr)
+    found = det.feed(audio)
+    return {"fa_audio_min": round(len(audio) / RATE / 60, 2), "wake_false_accepts": len(found),
+            "fa_max_scores": {k: round(v, 3) for k, v in det.max_scores.items()},
+            "fa_detections": [(d.model, round(d.time_s, 1)) for d in found[:10]]}  # fmt: skip
+
+
+async def _latency(models: Any, settings: Any, speech: Any, turns: int) -> dict[str, Any]:
+    from sage_robot.core.bus import Bus
+    from sage_robot.core.clock import WallClock
+    from sage_robot.core.msgs import Text
+    from sage_robot.core.topics import CONVERSE
+    from sage_robot.sim.audio import SimMicrophone, SimSpeaker
+    from sage_robot.voice.audio_io import resample
+    from sage_robot.voice.node import build_pipeline
+    from sage_robot.voice.pipeline import State
+
+    clock = WallClock()
+    bus = Bus(clock)
+
+    async def echo(goal: Text, ctx: Any) -> Text:
+        ctx.feedback(Text(f"You asked: {goal.data}"))
+        return Text(goal.data)
+
+    bus.actions.serve(CONVERSE, echo)
+    mic = SimMicrophone(clock)
+    spk = SimSpeaker(clock, mic, echo_gain=0.1)
+    pipe = build_pipeline(bus, clock, settings, models, mic, spk)
+    task = asyncio.create_task(pipe.run())
+
+    def say(text: str) -> np.ndarray:
+        return resample(speech.synthesize(text), speech.sample_rate, RATE)
+
+    pause = np.zeros(RATE // 2, dtype=np.int16)
+    for i in range(turns):
+        mic.inject(np.concatenate([pause, say("Hey Jarvis."), pause,
+                                   say(QUESTIONS[i % len(QUESTIONS)]), pause]))  # fmt: skip
+        deadline = time.monotonic() + 60
+        n = len(pipe.latencies)
+        while time.monotonic() < deadline and (len(pipe.latencies) == n or pipe.state is not State.IDLE
+                                               or mic.pending_s > 0):  # fmt: skip
+            await asyncio.sleep(0.05)
+    task.cancel()
+    await asyncio.gather(task, return_exceptions=True)
+    delays = [m.reply_delay_s for m in pipe.latencies if m.reply_delay_s == m.reply_delay_s]
+    stt = [m.stt_done - m.end_of_speech for m in pipe.latencies if m.stt_done == m.stt_done]
+    out: dict[str, Any] = {"turns": len(pipe.latencies), "turns_answered": len(delays)}
+    if delays:
+        out["end_of_speech_to_first_audio_s_median"] = round(statistics.median(delays), 3)
+        out["end_of_speech_to_first_audio_s_max"] = round(max(delays), 3)
+        out["last_word_to_first_audio_s_median"] = round(
+            statistics.median(delays) + settings.vad_silence_s, 3)  # fmt: skip
+    if stt:
+        out["stt_s_median"] = round(statistics.median(stt), 3)
+    return out
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    import os
+
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    from sage_robot.core.config.areas import VoiceSettings
+    from sage_robot.voice.node import VoiceModels
+
+    settings = VoiceSettings(tts_deterministic=False)
+    t0 = time.perf_counter()
+    models = VoiceModels.load(settings)
+    out: dict[str, Any] = {"bench": "voice", "load_s": round(time.perf_counter() - t0, 2),
+                           "cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 1)}
+    out.update(_frame_cpu(models))
+    out.update(_stt(models.stt, models.speech))
+    out.update(_tts(models.speech))
+    out.update(asyncio.run(_latency(models, settings, models.speech, 2 if args.quick else args.turns)))
+    thr = settings.wake_threshold
+    out.update(_false_rejects(models, _wake_clips(models.speech, args.quick), thr))
+    minutes = 0.5 if args.quick else args.fa_minutes
+    out.update(_false_accepts(models, _non_wake_audio(models.speech, minutes), thr))
+    return out

@@ -1,0 +1,115 @@
+"""Wake words with the real openWakeWord models on the robot's real (Piper) voice."""
+
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pytest
+
+from sage_robot.core.errors import ConfigError
+from sage_robot.voice.audio_io import FRAME_SAMPLES
+from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector, bundled_wake_models
+
+from .conftest import noise, silence
+
+NEUTRAL = [
+    "Welcome to the engineering building.",
+    "The robotics lab is on the first floor, past the glass doors.",
+    "Travis and Harvey are working on the drone.",
+    "Please follow me and mind the step.",
+    "Alex sat on the bench outside the cafe.",
+]
+
+
+def frame_scores(engine, audio: np.ndarray, chunks: list[int]) -> np.ndarray:
+    """Feed ``audio`` cut into pieces of the given sizes (cycled); every frame's scores."""
+    engine.reset()
+    det = WakeDetector(engine, keep_scores=True)
+    i = k = 0
+    while i < len(audio):
+        n = chunks[k % len(chunks)]
+        det.feed(audio[i : i + n])
+        i, k = i + n, k + 1
+    return np.array([[s["hey_jarvis"], s["alexa"]] for s in det.scores])
+
+
+def test_hey_jarvis_is_detected_once(models, say16k):
+    audio = np.concatenate([silence(0.5), say16k("Hey Jarvis."), silence(1.5)])
+    models.wake.reset()
+    det = WakeDetector(models.wake, threshold=0.6, refractory_s=2.0)
+    found = det.feed(audio)
+    assert [d.model for d in found] == ["hey_jarvis"]
+    assert 0.5 < found[0].time_s <= len(audio) / 16000
+    assert det.max_scores["alexa"] < 0.1
+
+
+def test_alexa_is_detected_by_its_own_model(models, say16k):
+    models.wake.reset()
+    det = WakeDetector(models.wake)
+    found = det.feed(np.concatenate([silence(0.5), say16k("Alexa."), silence(1.5)]))
+    assert [d.model for d in found] == ["alexa"]
+
+
+def test_refractory_merges_one_phrase_but_not_two(models, say16k):
+    phrase = say16k("Hey Jarvis.")
+    models.wake.reset()
+    det = WakeDetector(models.wake, refractory_s=2.0)
+    once = det.feed(np.concatenate([silence(0.5), phrase, silence(0.5)]))
+    twice = det.feed(np.concatenate([silence(2.5), phrase, silence(1.0)]))
+    assert len(once) == 1 and len(twice) == 1
+    assert twice[0].time_s - once[0].time_s > 2.0
+
+
+def test_score_does_not_depend_on_chunk_size(models, say16k):
+    """STYLE 11: the same audio in any chunking gives the same score for every frame."""
+    audio = np.concatenate([silence(0.4), say16k("Hey Jarvis."), noise(0.6)])
+    reference = frame_scores(models.wake, audio, [FRAME_SAMPLES])
+    assert len(reference) == len(audio) // FRAME_SAMPLES
+    assert reference[:, 0].max() > 0.6
+    for chunks in ([160], [512], [1000], [4000], [37, 2000, 777, 1280, 5]):
+        np.testing.assert_allclose(frame_scores(models.wake, audio, chunks), reference, atol=1e-6)
+
+
+def test_chunked_detections_match_exactly(models, say16k):
+    audio = np.concatenate([silence(0.4), say16k("Hey Jarvis."), silence(0.8)])
+    results = []
+    for chunk in (FRAME_SAMPLES, 333, 4096):
+        models.wake.reset()
+        det = WakeDetector(models.wake)
+        found = []
+        for i in range(0, len(audio), chunk):
+            found += det.feed(audio[i : i + chunk])
+        results.append([(d.model, d.time_s, round(d.score, 6)) for d in found])
+    assert results[0] and results[0] == results[1] == results[2]
+
+
+def test_no_wake_on_neutral_sentences_and_noise(models, say16k):
+    audio = np.concatenate([x for s in NEUTRAL for x in (say16k(s), silence(0.3))] + [noise(3, 800)])
+    models.wake.reset()
+    det = WakeDetector(models.wake)
+    assert det.feed(audio) == []
+    assert max(det.max_scores.values()) < 0.6
+
+
+def test_custom_onnx_model_loads_by_path(tmp_path, say16k):
+    """A custom model (the seed's "hey sage") is any openWakeWord .onnx file given by path."""
+    custom = tmp_path / "hey_sage.onnx"
+    shutil.copy(bundled_wake_models()["hey_jarvis"], custom)
+    engine = OpenWakeWordEngine([str(custom)])
+    assert engine.names == ("hey_sage",)
+    found = WakeDetector(engine).feed(np.concatenate([silence(0.5), say16k("Hey Jarvis."), silence(1)]))
+    assert [d.model for d in found] == ["hey_sage"]
+
+
+def test_bad_wake_models_are_clear_errors(tmp_path):
+    with pytest.raises(ConfigError, match=r"unknown wake model 'hey_nobody'.*bundled: .*hey_jarvis"):
+        OpenWakeWordEngine(["hey_nobody"])
+    with pytest.raises(ConfigError, match="no such file"):
+        OpenWakeWordEngine([str(tmp_path / "missing.onnx")])
+    broken = tmp_path / "broken.onnx"
+    broken.write_bytes(b"not a model")
+    with pytest.raises(ConfigError, match="cannot load wake models"):
+        OpenWakeWordEngine([str(broken)])
+    with pytest.raises(ConfigError, match="at least one"):
+        OpenWakeWordEngine([])
