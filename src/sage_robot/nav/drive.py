@@ -145,6 +145,8 @@ class GoalRun:
 
     async def _drive(self) -> None:
         """Plan and follow until arrival; raises Blocked."""
+        if self.node.lost():
+            await self._relocalize()
         self.feedback(NavState.PLANNING)
         current = await self._plan()
         ctl = PurePursuit(current.points, self.params, self.target.pose[2])
