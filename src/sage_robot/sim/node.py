@@ -39,6 +39,7 @@ PEOPLE_HZ = 10.0
 WATCHDOG_S = 0.55  # as the MCU firmware: a command older than this stops the body
 CMD_RESEND_S = 0.05  # a scenario's standing /cmd_vel is re-sent at 20 Hz
 EVENT_SOURCE = "sim"
+VISITOR_SAY = "/sim/visitor_say"  # = topics.SIM_VISITOR_SAY (the voice area's)
 
 
 class WorldNode(Node):
@@ -174,6 +175,8 @@ class WorldNode(Node):
             self._next["resend"] = now
         elif ev.action == "heard":
             self.bus.publish(topics.HEARD, Text(ev.value))
+        elif ev.action == "say":  # the voice node speaks it into the simulated microphone
+            self.bus.publish(getattr(topics, "SIM_VISITOR_SAY", VISITOR_SAY), Text(ev.value))
         elif ev.action == "goal":
             self.spawn(self._send_goal(ev.value), name="sim_world.goal")
         elif ev.action == "stop":

@@ -20,6 +20,7 @@
       - {at: 1.0, cmd_vel: [0.3, 0.0]}   # a standing /cmd_vel (v m/s, w rad/s), re-sent at 20 Hz
       - {at: 5.0, goal: GUELLY_DELLY}    # a navigate_to goal (needs the navigation node)
       - {at: 8.0, heard: "take me to the cafe"}   # a visitor's words on /sage/heard
+      - {at: 9.0, say: "hey jarvis, where is the cafe"}   # spoken into the sim microphone
       - {at: 60.0, stop: true}
 """
 
@@ -49,7 +50,7 @@ SCENARIO_KEYS = {
     "events",
     "description",
 }
-EVENT_ACTIONS = ("cmd_vel", "goal", "heard", "stop")
+EVENT_ACTIONS = ("cmd_vel", "goal", "heard", "say", "stop")
 CLUTTER_KEYS = {"name", "kind", "center", "size", "yaw", "height"}
 DEFAULT_LOW_HEIGHT_M = 0.45
 
@@ -138,7 +139,7 @@ def _event(entry: Any, where: str) -> TimedEvent:
         except (TypeError, ValueError):
             raise ConfigError(f"{where}: cmd_vel must be [v m/s, w rad/s], got {value!r}") from None
         value = (v, w)
-    elif action in ("goal", "heard") and not isinstance(value, str):
+    elif action in ("goal", "heard", "say") and not isinstance(value, str):
         raise ConfigError(f"{where}: {action} must be text, got {value!r}")
     return TimedEvent(at, action, value)
 

@@ -140,9 +140,9 @@ class World:
         if self.raycaster.clearance_at(x, y) < r:
             out.add("wall:map")
         for i, (bx, by, reach) in enumerate(self._box_reach):
-            if abs(x - bx) < reach and abs(y - by) < reach:  # cheap test first
-                if float(_box_distance(x, y, self._boxes[i : i + 1])[0]) < r:
-                    out.add(f"low_obstacle:{self.low_obstacles[i].name}")
+            near = abs(x - bx) < reach and abs(y - by) < reach  # cheap test first
+            if near and float(_box_distance(x, y, self._boxes[i : i + 1])[0]) < r:
+                out.add(f"low_obstacle:{self.low_obstacles[i].name}")
         for p in self.crowd.people:
             if math.hypot(p.x - x, p.y - y) < r + PERSON_RADIUS_M:
                 out.add(f"person:{p.id}")
