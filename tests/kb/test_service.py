@@ -101,3 +101,21 @@ def test_bad_searches_name_the_problem(service, query, top_k, message):
 
 def test_search_on_an_empty_store_returns_nothing(service):
     assert service.search("anything at all", 5) == []
+
+
+def test_corpus_first_run_then_refresh_without_resurrecting_deleted(service, tmp_path):
+    corpus = tmp_path / "corpus"
+    (corpus / "places").mkdir(parents=True)
+    (corpus / "building.md").write_text("# Building\n\nOpen from seven.\n")
+    (corpus / "places" / "cafe.md").write_text("# Cafe\n\nCoffee and bagels.\n")
+    first = service.ensure_corpus(corpus)
+    assert sorted((r.source, r.status) for r in first) == [
+        ("corpus/building.md", "added"),
+        ("corpus/places/cafe.md", "added"),
+    ]
+    cafe = next(r for r in first if r.source.endswith("cafe.md"))
+    service.delete_document(cafe.document_id)  # an operator removed it
+    (corpus / "building.md").write_text("# Building\n\nOpen from eight.\n")  # a new release edits it
+    again = service.ensure_corpus(corpus)
+    assert [(r.source, r.status) for r in again] == [("corpus/building.md", "replaced")]
+    assert [d["source"] for d in service.list_documents()] == ["corpus/building.md"]

@@ -1,7 +1,8 @@
 """``KbNode``: the knowledge base on the bus, service ``/kb/search``.
 
 On start it opens the store named by the profile's ``kb`` section, loads the embedder and,
-when the store is empty, ingests the shipped corpus (first run), all in a worker thread so
+when the store is empty, ingests the shipped corpus (first run; later runs refresh the
+shipped documents it still has), all in a worker thread so
 the event loop never stalls. Requests that arrive before that finishes wait for it. The
 service object is also put in ``ctx.resources[KB_SERVICE]`` for the web server's routes
 (``sage_robot.kb.api.make_router(lambda: ctx.resources.get(KB_SERVICE), ...)``).
@@ -37,7 +38,7 @@ class KbNode(Node):
             self.service = await asyncio.to_thread(KbService.from_settings, self.settings.kb)
             if self.settings.kb.load_corpus:
                 results = await asyncio.to_thread(self.service.ensure_corpus)
-                self.ingested = sum(r.ok for r in results)
+                self.ingested = sum(r.status in ("added", "replaced") for r in results)
                 for r in results:
                     if not r.ok:
                         self.log.warning("corpus document not ingested", error=r.message)

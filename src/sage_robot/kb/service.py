@@ -137,13 +137,15 @@ class KbService:
         return results
 
     def ensure_corpus(self, folder: Path = CORPUS_DIR) -> list[IngestResult]:
-        """Ingest the shipped corpus when the store is empty (first run); else nothing."""
-        if self.store.list_documents():
-            return []
-        return [
-            self.ingest_file(p, CORPUS_PREFIX + p.relative_to(folder).as_posix())
-            for p in sorted(folder.rglob("*.md"))
-        ]
+        """First run (empty store): ingest the shipped corpus. Later runs: refresh the shipped
+        documents the store still has (a new SAGE version may have edited them; unchanged
+        ones cost a hash), without re-adding the ones an operator deleted."""
+        files = {CORPUS_PREFIX + p.relative_to(folder).as_posix(): p for p in sorted(folder.rglob("*.md"))}
+        docs = self.store.list_documents()
+        if docs:
+            present = {d.source for d in docs}
+            files = {source: path for source, path in files.items() if source in present}
+        return [self.ingest_file(path, source) for source, path in files.items()]
 
     # ---------------------------------------------------------------- search
     def search(self, query: str, top_k: int = 5) -> list[Passage]:
