@@ -164,3 +164,19 @@ def test_web_addresses_and_node_selection_errors() -> None:
     assert urls[0] == "http://localhost:8123/" and all(u.startswith("http://localhost:8123/") for u in urls)
     proc = run_cli("sim", "--headless", "--nodes", "sim_world,warp_drive", "--duration", "1", timeout=60)
     assert proc.returncode == 2 and "warp_drive not in the sim profile" in proc.stderr
+
+
+def test_a_real_map_without_lanes_gets_people_on_its_floor(shared_data: Any) -> None:
+    from sage_robot.sim.setup import build_world
+
+    path = shared_data("maps/willow-full/willow-full.yaml")
+    sc = parse_scenario({"map": str(path), "start": [10.0, 10.0, 0.0], "pedestrians": 5}, "willow")
+    world = build_world(load_profile(None, sc.settings_overrides()), sc)
+    assert world.crowd.lanes is None and len(world.crowd.people) == 5
+    for _ in range(500):
+        world.step(0.01)
+    for p in world.crowd.people:
+        assert world.raycaster.is_free(p.x, p.y), (p.x, p.y)
+    bad = parse_scenario({"map": str(path), "start": [-5.0, 10.0, 0.0]}, "willow")
+    with pytest.raises(ConfigError, match="not on free floor"):
+        build_world(load_profile(None, bad.settings_overrides()), bad)

@@ -137,6 +137,7 @@ class Crowd:
     ) -> None:
         self.people, self.lanes, self.clearance, self.rng = people, lanes, clearance, rng
         self.line_of_sight = line_of_sight  # (x0, y0, x1, y1) -> bool, for the approacher
+        self.is_free: Any = None  # (x, y) -> bool: known-free floor (random targets stay on it)
 
     # ---------------------------------------------------------------- geometry
     def bodies(self) -> np.ndarray:
@@ -251,12 +252,14 @@ class Crowd:
         for _ in range(50):
             x = p.x + float(self.rng.uniform(-8, 8))
             y = p.y + float(self.rng.uniform(-8, 8))
-            if self.clearance(x, y) > PERSON_RADIUS_M + 0.3:
+            if self.clearance(x, y) > PERSON_RADIUS_M + 0.3 and (self.is_free is None or self.is_free(x, y)):
                 return (x, y)
         return (p.x, p.y)
 
     def _free(self, x: float, y: float) -> bool:
-        return self.clearance(x, y) >= PERSON_RADIUS_M + WALL_MARGIN_M
+        return self.clearance(x, y) >= PERSON_RADIUS_M + WALL_MARGIN_M and (
+            self.is_free is None or self.is_free(x, y)
+        )
 
     def _move_toward(
         self,

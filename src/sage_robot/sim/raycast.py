@@ -88,6 +88,13 @@ class GridRaycaster:
         out[inb] = np.hypot(ex, ey) * self.res
         return out
 
+    def is_free(self, x: float, y: float) -> bool:
+        """True when (x, y) lies on a known-free cell of the map (not a wall, not unknown)."""
+        dx, dy = x - self._ox, y - self._oy
+        col = math.floor((self._c * dx + self._s * dy) / self.res)
+        row = math.floor((-self._s * dx + self._c * dy) / self.res)
+        return 0 <= row < self.height and 0 <= col < self.width and int(self.grid.data[row, col]) == 0
+
     def clearance_at(self, x: float, y: float) -> float:
         """:meth:`clearance` of one point, without numpy overhead (people and the body call it
         every step)."""

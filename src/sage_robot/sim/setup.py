@@ -11,7 +11,7 @@ import yaml
 
 from sage_robot.core.config import Settings
 from sage_robot.core.errors import ConfigError
-from sage_robot.core.mapio import read_map
+from sage_robot.core.mapio import FREE, read_map
 from sage_robot.core.msgs.sim import LowObstacle
 from sage_robot.core.paths import waypoints_yaml, world_map_yaml
 from sage_robot.core.places import Places, load_places
@@ -78,6 +78,10 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
         "start pose",
     )
     raycaster = GridRaycaster(grid)
+    if not raycaster.is_free(start[0], start[1]):
+        raise ConfigError(
+            f"{map_path}: the start pose ({start[0]:.2f}, {start[1]:.2f}) is not on free floor of the map"
+        )
     sim = settings.sim
     low: list[LowObstacle] = []
     if sim.clutter and (scenario is None or scenario.default_clutter):
@@ -90,7 +94,9 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
     lanes = Lanes.from_dict(extras.get("lanes"))
     people = people_from_specs(list(scenario.people) if scenario else [], 0, resolve)
     rng = np.random.default_rng(np.random.SeedSequence(sim.seed).spawn(SPAWN_STREAM + 1)[SPAWN_STREAM])
-    free_cells = np.flatnonzero(raycaster.edt_cells.ravel() * raycaster.res >= FREE_SPOT_CLEARANCE_M)
+    free_cells = np.flatnonzero(
+        (grid.data.ravel() == FREE) & (raycaster.edt_cells.ravel() * raycaster.res >= FREE_SPOT_CLEARANCE_M)
+    )
 
     def sample_free(g: np.random.Generator) -> tuple[float, float]:
         if free_cells.size == 0:

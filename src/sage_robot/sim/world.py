@@ -79,6 +79,7 @@ class World:
         self.crowd = Crowd(
             list(people or []), lanes, self.raycaster.clearance_at, self.rng_people, self.line_of_sight
         )
+        self.crowd.is_free = self.raycaster.is_free
         self._camera: Camera | None = None
         self.x, self.y, self.theta = start
         self.v = self.w = 0.0
