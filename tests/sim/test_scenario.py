@@ -180,3 +180,16 @@ def test_a_real_map_without_lanes_gets_people_on_its_floor(shared_data: Any) -> 
     bad = parse_scenario({"map": str(path), "start": [-5.0, 10.0, 0.0]}, "willow")
     with pytest.raises(ConfigError, match="not on free floor"):
         build_world(load_profile(None, bad.settings_overrides()), bad)
+
+
+async def test_scenario_battery_reaches_the_firmware_model() -> None:
+    from sage_robot.app.runtime import specs_for
+
+    scenario = parse_scenario({"battery": 0.3, "pedestrians": 0}, "low battery")
+    settings = load_profile(None, {"sim": {"speed": None, "camera_hz": 0, "pedestrians": 0}})
+    ctx = make_context(settings, simulated=True)
+    ctx.resources[SCENARIO_RESOURCE] = scenario
+    specs = [s for s in specs_for("sim") if s.name in ("sim_world", "mcu_sim")]
+    launcher = await run_launcher(ctx, specs, until=2.0)
+    charge = launcher.nodes["mcu_sim"].firmware.battery.charge  # type: ignore[attr-defined]
+    assert charge == pytest.approx(0.3, abs=0.001)

@@ -33,7 +33,7 @@ WORLD_RESOURCE = "sim_world"  # ctx.resources key of the World
 SCENARIO_RESOURCE = "sim_scenario"  # ctx.resources key of the Scenario being run (optional)
 SUMMARY_RESOURCE = "sim_summary"  # ctx.resources key: dict of scenario goal results etc.
 SIM_STEP_HOOKS = "sim_step_hooks"  # = app.runtime.SIM_STEP_HOOKS (app imports sim, not back)
-MCU_NODE = "mcu_sim"
+MCU_NODE = "mcu_sim"  # its node name and its ctx.resources key
 TRUTH_HZ = 50.0
 PEOPLE_HZ = 10.0
 WATCHDOG_S = 0.55  # as the MCU firmware: a command older than this stops the body
@@ -65,6 +65,7 @@ class WorldNode(Node):
         if self.direct_drive:
             self.subscribe(topics.CMD_VEL, Twist, self._on_cmd)
         self._events = list(self.scenario.events) if self.scenario else []
+        self._battery_pending = self.scenario.battery if self.scenario and not self.direct_drive else None
         self._standing: Twist | None = None
         self._next = {"scan": 0.0, "truth": 0.0, "people": 0.0, "resend": 0.0}
         self._camera_wall = 0.0
@@ -119,6 +120,8 @@ class WorldNode(Node):
     # ---------------------------------------------------------------- the step
     def _physics(self, dt: float) -> None:
         now = self.clock.now()
+        if self._battery_pending is not None:
+            self._apply_battery()
         self._play_events(now)
         if self.direct_drive:
             self._drive_direct(dt, now)
@@ -158,6 +161,15 @@ class WorldNode(Node):
             self._camera_wall = wall
             self.bus.publish(topics.CAMERA, w.camera_msg(t))
             self.frames += 1
+
+    def _apply_battery(self) -> None:
+        """The scenario's initial charge, set once on the firmware model's battery (its
+        ``charge``, 0..1) as soon as the simulated MCU node is up."""
+        battery = getattr(getattr(self.ctx.resources.get(MCU_NODE), "firmware", None), "battery", None)
+        if battery is not None and hasattr(battery, "charge"):
+            battery.charge = self._battery_pending
+            self.log.info("scenario battery set", charge=self._battery_pending)
+            self._battery_pending = None
 
     # ---------------------------------------------------------------- scenario
     def _play_events(self, now: float) -> None:

@@ -15,7 +15,7 @@
     default_clutter: true     # the building's own benches and carts (world.yaml)
     clutter:                  # more low obstacles
       - {name: bench1, kind: bench, center: [55.0, 40.0], size: [1.6, 0.45], yaw: 0.0, height: 0.45}
-    battery: 0.8              # initial charge 0..1 (read by the firmware model if it supports it)
+    battery: 0.8              # initial charge 0..1 of the firmware model's battery
     events:                   # at (s) and exactly one action
       - {at: 1.0, cmd_vel: [0.3, 0.0]}   # a standing /cmd_vel (v m/s, w rad/s), re-sent at 20 Hz
       - {at: 5.0, goal: GUELLY_DELLY}    # a navigate_to goal (needs the navigation node)
