@@ -24,10 +24,11 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from sage_robot.core.geometry import compose, relative
 from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap
-from sage_robot.nav.slam.points import Pose, Scan, transform, voxel_filter
+from sage_robot.nav.slam.points import Pose, Scan, normals, rotate, transform, voxel_filter, voxel_indices
 from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, PoseGraph
 
 MIN_SCAN_POINTS = 20  # a scan with fewer hits is dead-reckoned
@@ -54,10 +55,13 @@ class SlamConfig:
     loop_min_travel_m: float = 12.0  # ...and at least this far back along the trajectory
     loop_search_xy_m: float = 2.0  # loop-closure correlative window (±)
     loop_search_theta_rad: float = 0.35
-    loop_search_theta_step_rad: float = 0.015
+    loop_search_theta_step_rad: float = 0.02
     loop_submap_keyframes: int = 12  # old keyframes each side of the candidate in its submap
     loop_min_score: float = 0.55  # mean likelihood a loop closure needs
     loop_min_inliers: float = 0.65  # fraction of points within inlier_m a loop closure needs
+    loop_distinct_m: float = 0.5  # another match this far away...
+    loop_max_ambiguity: float = 0.85  # ...scoring this fraction of the best: ambiguous, rejected
+    loop_max_chi: float = 8.0  # a loop edge's Mahalanobis error after optimising must stay below this
     loop_information_scale: float = 0.5  # a loop edge counts this much of a scan-match edge
     loop_every_keyframes: int = 2  # try a loop closure every this many keyframes
     match: MatchConfig = field(default_factory=MatchConfig)
@@ -70,6 +74,12 @@ class Keyframe:
     scan: Scan
     points: np.ndarray  # robot frame, map_voxel_m filtered
     travel_m: float  # trajectory length up to here
+    normals: np.ndarray | None = None  # of the points, robot frame (computed once)
+
+    def point_normals(self) -> np.ndarray:
+        if self.normals is None:
+            self.normals = normals(self.points, cKDTree(self.points)) if len(self.points) else self.points
+        return self.normals
 
 
 @dataclass(frozen=True)
@@ -98,6 +108,8 @@ class Slam:
         self.pose: Pose = initial_pose
         self.last_score = 0.0
         self.loop_attempts = 0
+        self.loops_rejected = 0  # matched, but the optimised graph disagreed with them
+        self._kf_pose_before: Pose = initial_pose
         self.optimizations = 0
         self.map_version = 0  # bumps when keyframe poses change (after an optimisation)
         self._last_odom: Pose | None = None
@@ -170,15 +182,24 @@ class Slam:
             self.graph.add_edge(i, node, odo, np.diag([sxy**-2, sxy**-2, sth**-2]), KIND_ODOM)
         self._rebuild_local()
 
-    def _points_of(self, indices: range | list[int]) -> np.ndarray:
-        chunks = [transform(self.graph.poses[k], self.keyframes[k].points) for k in indices]
-        return voxel_filter(np.concatenate(chunks), self.config.map_voxel_m) if chunks else np.zeros((0, 2))
+    def _points_of(self, indices: range | list[int]) -> tuple[np.ndarray, np.ndarray]:
+        """Map-frame points and normals of these keyframes, one per map_voxel_m cell."""
+        if not indices:
+            return np.zeros((0, 2)), np.zeros((0, 2))
+        pts = np.concatenate([transform(self.graph.poses[k], self.keyframes[k].points) for k in indices])
+        nrm = np.concatenate(
+            [rotate(self.graph.poses[k][2], self.keyframes[k].point_normals()) for k in indices]
+        )
+        keep = voxel_indices(pts, self.config.map_voxel_m)
+        return pts[keep], nrm[keep]
 
     def _rebuild_local(self) -> None:
         n = len(self.keyframes)
-        pts = self._points_of(range(max(0, n - self.config.local_keyframes), n))
+        pts, nrm = self._points_of(range(max(0, n - self.config.local_keyframes), n))
         self._local = (
-            PointMap(pts, self.config.match, self.config.search_xy_m) if len(pts) >= MIN_SCAN_POINTS else None
+            PointMap(pts, self.config.match, self.config.search_xy_m, nrm)
+            if len(pts) >= MIN_SCAN_POINTS
+            else None
         )
 
     # ------------------------------------------------------------------ loop closure
@@ -209,20 +230,36 @@ class Slam:
         h = cfg.loop_submap_keyframes
         limit = self.keyframes[k].travel_m - cfg.loop_min_travel_m
         members = [i for i in range(max(0, j - h), min(k, j + h + 1)) if self.keyframes[i].travel_m < limit]
-        sub = PointMap(self._points_of(members), cfg.match, cfg.loop_search_xy_m)
+        pts, nrm = self._points_of(members)
+        if len(pts) < MIN_SCAN_POINTS:
+            return False
+        sub = PointMap(pts, cfg.match, cfg.loop_search_xy_m, nrm)
         q = voxel_filter(self.keyframes[k].points, cfg.scan_voxel_m)
         guess = self.graph.poses[k]
         init, score = sub.search(
-            q, guess, cfg.loop_search_xy_m, cfg.loop_search_theta_rad, cfg.loop_search_theta_step_rad
+            q,
+            guess,
+            cfg.loop_search_xy_m,
+            cfg.loop_search_theta_rad,
+            cfg.loop_search_theta_step_rad,
+            distinct_m=cfg.loop_distinct_m,
         )
-        if score < cfg.loop_min_score * 0.8:
+        if score < cfg.loop_min_score * 0.8 or sub.last_second_best > cfg.loop_max_ambiguity * score:
             return False
         match = sub.refine(q, init)
         if match.score < cfg.loop_min_score or match.inliers < cfg.loop_min_inliers:
             return False
         z = relative(self.graph.poses[j], match.pose)
+        backup = list(self.graph.poses)
+        self._kf_pose_before = backup[k]
         self.graph.add_edge(j, k, z, match.information * cfg.loop_information_scale, KIND_LOOP)
-        self.optimize()
+        self.graph.optimize()
+        if self.graph.edge_errors()[-1] > cfg.loop_max_chi:  # the rest of the graph disagrees
+            self.graph.edges.pop()
+            self.graph.poses = backup
+            self.loops_rejected += 1
+            return False
+        self._after_optimization()
         return True
 
     def optimize(self) -> dict[str, float]:
@@ -230,11 +267,17 @@ class Slam:
         k = len(self.keyframes) - 1
         offset = relative(self.graph.poses[k], self.pose)
         stats = self.graph.optimize()
+        self._after_optimization(offset)
+        return stats
+
+    def _after_optimization(self, offset: Pose | None = None) -> None:
+        k = len(self.keyframes) - 1
+        if offset is None:
+            offset = relative(self._kf_pose_before, self.pose)
         self.optimizations += 1
         self.map_version += 1
         self.pose = compose(self.graph.poses[k], offset)
         self._rebuild_local()
-        return stats
 
     def resume(self) -> None:
         """After keyframes and graph were restored: track on from the last keyframe."""

@@ -29,10 +29,10 @@ MIN_MATCH_POINTS = 10  # fewer scan points than this: no match
 
 @dataclass(frozen=True)
 class MatchConfig:
-    grid_res_m: float = 0.05  # likelihood field cell size
-    sigma_m: float = 0.08  # likelihood fall-off with distance to the nearest map point
-    icp_stages_m: tuple[float, ...] = (0.5, 0.25, 0.12, 0.06)  # association gates, coarse to fine
-    icp_iterations: int = 8  # Gauss-Newton steps per stage
+    grid_res_m: float = 0.1  # likelihood field cell size (m): coarse, ICP refines
+    sigma_m: float = 0.1  # likelihood fall-off with distance to the nearest map point
+    icp_stages_m: tuple[float, ...] = (0.25, 0.1)  # association gates (m), coarse to fine
+    icp_iterations: int = 6  # Gauss-Newton steps per stage
     huber_m: float = 0.03  # residuals beyond this are down-weighted
     inlier_m: float = 0.08  # a scan point this close to the map counts as matched
     point_sigma_m: float = 0.01  # residual noise per point for the match's information
@@ -49,14 +49,21 @@ class Match:
 class PointMap:
     """Map-frame points to match against. ``margin_m`` bounds the search window."""
 
-    def __init__(self, pts: np.ndarray, config: MatchConfig, margin_m: float = 1.0) -> None:
+    def __init__(
+        self,
+        pts: np.ndarray,
+        config: MatchConfig,
+        margin_m: float = 1.0,
+        point_normals: np.ndarray | None = None,
+    ) -> None:
         self.config = config
         self.points = pts
         self.tree = cKDTree(pts)
-        self.normals = normals(pts, self.tree)
+        self.normals = normals(pts, self.tree) if point_normals is None else point_normals
         self.margin_m = margin_m
         self._field: np.ndarray | None = None
         self._coarse: np.ndarray | None = None
+        self.last_second_best = 0.0
 
     # ---------------------------------------------------------------- likelihood field
     def _build_field(self) -> None:
@@ -109,12 +116,20 @@ class PointMap:
 
     # ---------------------------------------------------------------- correlative search
     def search(
-        self, q: np.ndarray, prior: Pose, window_xy_m: float, window_theta: float, theta_step: float
+        self,
+        q: np.ndarray,
+        prior: Pose,
+        window_xy_m: float,
+        window_theta: float,
+        theta_step: float,
+        distinct_m: float = 0.0,
     ) -> tuple[Pose, float]:
         """Best pose of the robot-frame points ``q`` within ±window of ``prior`` on the field grid.
 
         Returns the pose and its score (mean likelihood). Exact on the grid: a coarse block is
         refined while its upper bound beats the best fine score (up to MAX_BRANCHES blocks).
+        With ``distinct_m`` > 0, ``last_second_best`` is then the best score of poses more than
+        that far (m) from the best one: close to the best score means an ambiguous match.
         """
         _, field, coarse = self.field()
         res = self.config.grid_res_m
@@ -132,23 +147,31 @@ class PointMap:
         for a0 in range(0, len(thetas), batch):
             idx = base[a0 : a0 + batch, :, None] + offsets[None, None, :]
             bounds[a0 : a0 + batch] = np.take(flat_coarse, idx, mode="clip").mean(axis=1)
-        order = np.argsort(bounds, axis=None)[::-1]
         fy, fx = np.meshgrid(np.arange(COARSE), np.arange(COARSE), indexing="ij")
         fine = (fy * width + fx).ravel()
-        best, best_pose = -1.0, prior
-        for k, flat in enumerate(order):
-            a, o = divmod(int(flat), len(offsets))
-            if bounds[a, o] <= best or k >= MAX_BRANCHES:
-                break
-            scores = np.take(flat_field, base[a][:, None] + offsets[o] + fine[None, :], mode="clip").mean(
-                axis=0
-            )
-            i = int(np.argmax(scores))
-            if scores[i] > best:
-                best = float(scores[i])
-                dy = cy.ravel()[o] + fy.ravel()[i]
-                dx = cx.ravel()[o] + fx.ravel()[i]
-                best_pose = (prior[0] + dx * res, prior[1] + dy * res, float(thetas[a]))
+
+        def branch(bounds: np.ndarray) -> tuple[float, int, int, int]:
+            best, best_a, best_o, best_i = -1.0, 0, 0, 0
+            order = np.argsort(bounds, axis=None)[::-1]
+            for k, flat in enumerate(order[:MAX_BRANCHES]):
+                a, o = divmod(int(flat), len(offsets))
+                if bounds[a, o] <= best:
+                    break
+                cells = base[a][:, None] + offsets[o] + fine[None, :]
+                scores = np.take(flat_field, cells, mode="clip").mean(axis=0)
+                i = int(np.argmax(scores))
+                if scores[i] > best:
+                    best, best_a, best_o, best_i = float(scores[i]), a, o, i
+            return best, best_a, best_o, best_i
+
+        best, a, o, i = branch(bounds)
+        dy = cy.ravel()[o] + fy.ravel()[i]
+        dx = cx.ravel()[o] + fx.ravel()[i]
+        best_pose = (prior[0] + dx * res, prior[1] + dy * res, float(thetas[a]))
+        self.last_second_best = 0.0
+        if distinct_m > 0:  # the best score of poses at least distinct_m away: ambiguity
+            far = np.hypot(cx.ravel() - dx, cy.ravel() - dy) * res > distinct_m
+            self.last_second_best = max(branch(np.where(far[None, :], bounds, -1.0))[0], 0.0)
         return best_pose, max(best, 0.0)
 
     # ---------------------------------------------------------------- refinement

@@ -67,6 +67,22 @@ def voxel_filter(pts: np.ndarray, size: float) -> np.ndarray:
     return sums / counts[:, None]
 
 
+def voxel_indices(pts: np.ndarray, size: float) -> np.ndarray:
+    """Indices of one point per ``size`` (m) square cell (the first one in it)."""
+    if len(pts) == 0:
+        return np.zeros(0, dtype=np.int64)
+    keys = np.floor(pts / size).astype(np.int64)
+    keys -= keys.min(axis=0)
+    flat = keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1]
+    return np.sort(np.unique(flat, return_index=True)[1])
+
+
+def rotate(theta: float, vecs: np.ndarray) -> np.ndarray:
+    """Directions (N, 2) turned by ``theta`` (rad)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.column_stack((c * vecs[:, 0] - s * vecs[:, 1], s * vecs[:, 0] + c * vecs[:, 1]))
+
+
 def normals(pts: np.ndarray, tree: object) -> np.ndarray:
     """Unit normals (N, 2) by principal axes of each point's neighbours (``tree``: a cKDTree
     of ``pts``). A point without enough close neighbours gets a zero normal."""

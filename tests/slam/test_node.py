@@ -1,0 +1,103 @@
+"""The slam node on a bus: scans + odometry in, progress and a growing /map out, save service."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import numpy as np
+
+from sage_robot.app.profiles import PROFILES
+from sage_robot.core import topics
+from sage_robot.core.bus import Bus
+from sage_robot.core.clock import SimClock
+from sage_robot.core.config import load_profile
+from sage_robot.core.mapio import read_map
+from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D, Twist
+from sage_robot.core.node import NodeContext
+from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgress
+from sage_robot.nav.slam.node import (
+    AUTOSAVE_RESOURCE,
+    OUT_DIR_RESOURCE,
+    SAVED_RESOURCE,
+    SLAM_PROGRESS,
+    SLAM_SAVE,
+    SlamNode,
+)
+
+from .synth import corridor_loop, loop_path, simulate
+
+WAIT_S = 20.0  # bound on every wait (a loaded 2-core machine)
+SCANS = 25
+
+
+async def test_node_maps_publishes_and_saves(tmp_path: Path) -> None:
+    settings = load_profile(None, {"robot": {"lidar": {"x_m": 0.0, "y_m": 0.0, "yaw_rad": 0.0}}})
+    clock = SimClock()
+    bus = Bus(clock)
+    ctx = NodeContext(bus, clock, settings)
+    ctx.resources[OUT_DIR_RESOURCE] = str(tmp_path / "maps")
+    ctx.resources[AUTOSAVE_RESOURCE] = "on_exit"
+    truth = loop_path(step_m=0.3)[:SCANS]
+    drive = simulate(corridor_loop(), truth, yaw_drift=0.01)
+    node = SlamNode(ctx)
+    await node.setup()
+    progress = bus.subscribe(SLAM_PROGRESS, SlamProgress, maxsize=100)
+    maps = bus.subscribe(topics.MAP, OccupancyGrid, maxsize=10)
+    try:
+        last: SlamProgress | None = None
+        for k in range(SCANS):
+            await clock.step(0.2)
+            x, y, th = drive.odom[k]
+            bus.publish(topics.ODOM, Odometry(clock.now(), Pose2D(x, y, th), Twist()))
+            await asyncio.sleep(0)
+            scan = drive.scans[k]
+            bus.publish(
+                topics.SCAN,
+                LaserScan(
+                    clock.now(),
+                    "laser",
+                    float(scan.angles[0]),
+                    float(scan.angles[1] - scan.angles[0]),
+                    0.1,
+                    12.0,
+                    scan.ranges,
+                ),
+            )
+            last = await asyncio.wait_for(progress.get(), WAIT_S)
+        assert last is not None and last.scans == SCANS
+        assert last.keyframes >= SCANS // 2 and last.match_score > 0.5
+        # The estimate follows the truth (map frame = the first pose, here the origin).
+        assert np.hypot(last.pose.x - truth[-1][0], last.pose.y - truth[-1][1]) < 0.1
+        await clock.step(1.0)
+        now = clock.now()
+        grid = await asyncio.wait_for(maps.get(), WAIT_S)
+        while grid.stamp < now - 1e-6:  # maps published while driving, then the final one
+            grid = await asyncio.wait_for(maps.get(), WAIT_S)
+        assert (grid.data == 100).sum() > 500 and (grid.data == 0).sum() > 2000
+        assert bus.latest(topics.MAP) is grid  # latched for late subscribers
+
+        reply = await bus.call(SLAM_SAVE, SaveMapRequest("demand", str(tmp_path / "other")), timeout=WAIT_S)
+        assert isinstance(reply, SaveMapReply) and Path(reply.graph).exists()
+        saved = read_map(reply.yaml)
+        assert (saved.data == 100).sum() > 500
+        bad = bus.call(SLAM_SAVE, SaveMapRequest("../x"), timeout=WAIT_S)
+        try:
+            await bad
+        except Exception as exc:  # the handler's ConfigError comes back as a ServiceError
+            assert "use letters" in str(exc)
+        else:
+            raise AssertionError("a bad name was accepted")
+    finally:
+        await node.teardown()
+        await node._close()
+    paths = ctx.resources[SAVED_RESOURCE]
+    assert Path(paths["yaml"]).parent == tmp_path / "maps" and Path(paths["pgm"]).exists()
+
+
+def test_sim_slam_profile() -> None:
+    names = [n for n, _ in PROFILES["sim_slam"]]
+    assert "slam" in names
+    assert not {"localization", "navigator", "map_server"} & set(names)
+    assert set(names) - {"slam"} <= {n for n, _ in PROFILES["sim"]}
+    assert "slam" in [n for n, _ in PROFILES["slam"]]
