@@ -141,7 +141,10 @@ def test_espeak_engine_is_a_drop_in_tts(models):
     assert "forward" in text and ("ten" in text or "10" in text)
 
 
-def test_engine_choice_errors_and_web_helper():
+def test_engine_choice_errors_and_web_helper(models, monkeypatch):
+    import sage_robot.voice.tts as tts
+
+    monkeypatch.setattr(tts, "_default", models.speech)  # the shared voice, already loaded
     with pytest.raises(ConfigError, match="unknown TTS engine 'festival'"):
         make_engine("festival")
     with pytest.raises(ConfigError, match=r"Piper voice '/nope\.onnx'"):

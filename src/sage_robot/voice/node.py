@@ -14,8 +14,11 @@ a simulated visitor says into the microphone, rendered with the robot's TTS).
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 from sage_robot.core.clock import Clock
 from sage_robot.core.config.areas import VoiceSettings
@@ -34,6 +37,7 @@ from sage_robot.voice.tts import Speech, make_engine
 from sage_robot.voice.vad import SileroVad
 from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
 
+T = TypeVar("T")
 SIM_OUT_DIR_KEY = "voice_sim_out_dir"  # ctx.resources: where the sim speaker writes WAV files
 SIM_AUDIO_KEY = "voice_sim_audio"  # ctx.resources: (SimMicrophone, SimSpeaker) once set up
 
@@ -71,6 +75,32 @@ def build_pipeline(
     return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt)
 
 
+async def in_daemon_thread(fn: Callable[..., T], *args: Any) -> T:
+    """Run ``fn`` in a daemon thread: model loading takes seconds, and a process that stops
+    meanwhile (a short ``sage sim --duration``) must not wait for it to finish."""
+    loop = asyncio.get_running_loop()
+    fut: asyncio.Future[T] = loop.create_future()
+
+    def settle(value: Any, exc: BaseException | None) -> None:
+        if fut.done():
+            return
+        if exc is not None:
+            fut.set_exception(exc)
+        else:
+            fut.set_result(value)
+
+    def work() -> None:
+        try:
+            value, exc = fn(*args), None
+        except BaseException as e:  # handed to the awaiting task
+            value, exc = None, e
+        with contextlib.suppress(RuntimeError):  # the loop closed: nobody waits any more
+            loop.call_soon_threadsafe(settle, value, exc)
+
+    threading.Thread(target=work, name="voice.load", daemon=True).start()
+    return await fut
+
+
 class VoiceNode(Node):
     name = "voice"
 
@@ -95,7 +125,7 @@ class VoiceNode(Node):
     async def _start_pipeline(self) -> None:
         """Load the models off the loop (seconds), then run the pipeline forever."""
         try:
-            models = await asyncio.to_thread(VoiceModels.load, self.vs)
+            models = await in_daemon_thread(VoiceModels.load, self.vs)
             self._open_audio()
         except (ConfigError, DeviceNotConnectedError) as exc:
             self.log.error("voice pipeline unavailable", error=str(exc))
