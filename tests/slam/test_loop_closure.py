@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import replace
 
@@ -62,7 +63,7 @@ def test_pose_graph_spreads_a_loop_error() -> None:
     for k in range(40):
         truth.append(compose(truth[-1], (1.0, 0.0, math.pi / 2 if k % 10 == 9 else 0.0)))
     est = [truth[0]]
-    for a, b in zip(truth, truth[1:]):
+    for a, b in itertools.pairwise(truth):
         dx, dy, dth = relative(a, b)
         est.append(compose(est[-1], (dx + rng.normal(0, 0.02), dy + rng.normal(0, 0.02), dth + 0.01)))
     graph = PoseGraph()

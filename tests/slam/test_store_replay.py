@@ -34,7 +34,7 @@ def short_session(n: int = 40) -> tuple[Slam, list, list]:
 
 
 def test_save_load_round_trip_and_resume(tmp_path: Path) -> None:
-    slam, odom, scans = short_session()
+    slam, _odom, scans = short_session()
     paths = save_session(slam, tmp_path / "out", "floor1")
     assert set(paths) == {"yaml", "pgm", "graph", "trajectory"}
     meta = yaml.safe_load(Path(paths["yaml"]).read_text())

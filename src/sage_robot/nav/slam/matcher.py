@@ -153,7 +153,7 @@ class PointMap:
         def branch(bounds: np.ndarray) -> tuple[float, int, int, int]:
             best, best_a, best_o, best_i = -1.0, 0, 0, 0
             order = np.argsort(bounds, axis=None)[::-1]
-            for k, flat in enumerate(order[:MAX_BRANCHES]):
+            for _k, flat in enumerate(order[:MAX_BRANCHES]):
                 a, o = divmod(int(flat), len(offsets))
                 if bounds[a, o] <= best:
                     break
