@@ -34,6 +34,7 @@ from sage_robot.core.errors import ConfigError
 from sage_robot.core.mapio import read_map
 from sage_robot.core.msgs import OccupancyGrid, Odometry, Pose2D, Text
 from sage_robot.core.msgs.nav import NavigateGoal, NavigateResult
+from sage_robot.core.node import NodeState
 from sage_robot.core.paths import DEFAULT_BUILDING, map_yaml, package_data
 from sage_robot.core.places import Place, Places, write_places
 
@@ -53,7 +54,7 @@ CHROMIUM_ARGS = [
     "--autoplay-policy=no-user-gesture-required",  # the kiosk tablet is set up so
 ]
 MAP_RES_M = 0.05
-WORLD_NODES = ("sim_world", "map_server", "localization", "navigator")  # used when registered
+WORLD_NODES = ("sim_world", "map_server", "localization", "navigator", "brain")  # when registered
 
 
 def artifacts_dir() -> Path:
@@ -141,6 +142,10 @@ class SimRobot:
 
         async def after_start(launcher: Any) -> None:
             self.launcher = launcher
+            for _ in range(int(START_TIMEOUT_S / 0.05)):  # stand-ins only for what did not start
+                if all(h.state is NodeState.RUNNING for h in launcher.health.values()):
+                    break
+                await asyncio.sleep(0.05)
             self.bus.subscribe(topics.ODOM, Odometry, self._on_odom)
             if "map_server" not in self.node_names:
                 self.stand_ins.append("map")

@@ -17,6 +17,7 @@ import pytest
 
 from sage_robot.core import topics
 from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
+from sage_robot.core.places import load_places
 
 pytestmark = pytest.mark.browser
 
@@ -236,12 +237,15 @@ def test_talk_typed_question_gets_a_reply(browser: Any, robot: Any) -> None:
     page = browser.new_page(viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True)
     console = Console(page)
     page.goto(f"{robot.url}/talk")
-    page.fill("#question", "Where is the clean room?")
+    page.fill("#question", "What is your name?")
     page.click("button[type=submit]")
     page.wait_for_selector(".bubble.sage", timeout=WAIT_S * 1000)
-    assert "first floor" in (page.text_content(".bubble.sage") or "")
-    assert page.text_content(".bubble.you") == "Where is the clean room?"
-    assert "Where is the clean room?" in robot.questions
+    reply = page.text_content(".bubble.sage") or ""
+    assert page.text_content(".bubble.you") == "What is your name?"
+    if "converse" in robot.stand_ins:  # the test's converse server
+        assert "first floor" in reply and "What is your name?" in robot.questions
+    else:  # the real brain (offline without an LLM endpoint)
+        assert robot.ctx.settings.robot.name in reply
     page.screenshot(path=str(robot.artifacts / "talk-reply.png"))
     page.close()
     assert [e for e in console.errors if "/api/talk/say" not in e] == []
@@ -278,8 +282,12 @@ def test_admin_adds_a_place_by_clicking_the_map(operator: Any, robot: Any) -> No
     page.locator("#map").scroll_into_view_if_needed()
     box = page.locator("#map").bounding_box()
     assert box is not None
-    page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5)
-    assert page.input_value("#p-x") != ""
+    # click where a known place stands (a free cell by construction of the waypoints file)
+    target = next(iter(load_places(robot.tmp / "waypoints.yaml"))).pose
+    px, py = page.evaluate(f"window.sageMap.toPx({target.x}, {target.y})")
+    page.mouse.click(box["x"] + px, box["y"] + py)
+    assert abs(float(page.input_value("#p-x")) - target.x) < 0.3
+    assert abs(float(page.input_value("#p-y")) - target.y) < 0.3
     page.fill("#p-name", "ATRIUM")
     page.fill("#p-desc", "the bright middle of the room")
     page.fill("#p-aliases", "the atrium, middle")

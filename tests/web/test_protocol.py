@@ -221,8 +221,9 @@ def test_visitor_audio_goes_through_ffmpeg_and_speech_to_text(robot: Any, client
     assert resp.status_code == 200, resp.text
     body = resp.json()
     assert "clean room" in body["transcript"].lower()
-    assert body["transcript"] in robot.questions
-    assert "first floor" in body["reply"]
+    assert body["reply"].strip()
+    if "converse" in robot.stand_ins:
+        assert body["transcript"] in robot.questions
 
 
 def test_visitor_questions_are_rate_limited(client: httpx.Client) -> None:

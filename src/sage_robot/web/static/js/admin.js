@@ -43,6 +43,7 @@ const map = new LiveMap($("map"), {
   },
 });
 new LiveSocket("/ws/live", { onMessage: (msg) => map.update(msg) });
+window.sageMap = map; // for debugging from the console (and the browser tests)
 
 async function loadInfo() {
   const { ok, data } = await api("/api/admin/info");

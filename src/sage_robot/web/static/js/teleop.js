@@ -82,6 +82,8 @@ const map = new LiveMap($("map"), {
   },
 });
 
+window.sageMap = map; // for debugging from the console (and the browser tests)
+
 function logEvent(source, text) {
   const log = $("events");
   log.prepend(el("div", {}, `${new Date().toLocaleTimeString()} ${source}: ${text}`));
