@@ -22,12 +22,14 @@ OCCUPIED_MIN = 50  # cells with a value >= this block rays (0..100 scale)
 SQRT2 = math.sqrt(2.0)
 CROSS_EPS_CELLS = 1e-4  # how far past a cell boundary a DDA step lands (cells)
 MIN_SPHERE_STEP_CELLS = 1.0  # below this safe distance, step cell by cell
-TRACE_ITERS = 14  # traced steps before the grazing beams left are finished by sampling...
+TRACE_ITERS = 20  # traced steps before the grazing beams left are finished by sampling...
 SAMPLE_MAX_BEAMS = 24  # ...once no more than this many are left (sampling costs per beam)
 MAX_TRACE_ITERS = 400
 SAMPLE_STEP_CELLS = 1.0  # sampling step for those (cells clipped in between are checked)
 REFINE_STEPS = 4  # exact cell steps between the last free and the first occupied sample
 FREE_CODE, OCC_CODE, OUT_CODE = 0, 1, 2
+PAD = 2  # cells of "outside" around the grid: a step from inside lands at most one cell out
+COMPACT_RATIO = 2  # drop finished beams from the arrays once they are half of them
 HUGE = 1e30
 
 
@@ -55,13 +57,19 @@ class GridRaycaster:
         # Distance any point of a cell is guaranteed to travel without touching an occupied
         # square: centre distance minus both half-diagonals.
         self._safe = np.maximum(self.edt_cells - SQRT2, 0.0).astype(np.float32)
-        # Padded copies with a one-cell border of "outside", indexed flat: one gather per step.
-        self._pad_w = self.width + 2
-        codes = np.full((self.height + 2, self.width + 2), OUT_CODE, dtype=np.uint8)
-        codes[1:-1, 1:-1] = np.where(self.occupied, OCC_CODE, FREE_CODE)
+        # Sphere steps never leave the grid: cap them at the distance to its border.
+        rows = np.arange(self.height, dtype=np.float32)[:, None]
+        cols = np.arange(self.width, dtype=np.float32)[None, :]
+        border = np.minimum(np.minimum(rows, self.height - 1 - rows), np.minimum(cols, self.width - 1 - cols))
+        safe_in = np.minimum(self._safe, border)
+        # Padded copies with a PAD-cell border of "outside", indexed flat: one gather per step.
+        self._pad_w = self.width + 2 * PAD
+        self._pad_off = PAD * self._pad_w + PAD
+        codes = np.full((self.height + 2 * PAD, self.width + 2 * PAD), OUT_CODE, dtype=np.uint8)
+        codes[PAD:-PAD, PAD:-PAD] = np.where(self.occupied, OCC_CODE, FREE_CODE)
         self._codes = codes.ravel()
-        safe = np.zeros((self.height + 2, self.width + 2), dtype=np.float64)
-        safe[1:-1, 1:-1] = self._safe
+        safe = np.zeros((self.height + 2 * PAD, self.width + 2 * PAD), dtype=np.float64)
+        safe[PAD:-PAD, PAD:-PAD] = safe_in
         self._safe_flat = safe.ravel()
 
     # ---------------------------------------------------------------- helpers
@@ -109,11 +117,15 @@ class GridRaycaster:
 
     # ---------------------------------------------------------------- casting
     def cast(self, x: float, y: float, angles: np.ndarray, max_range: float) -> np.ndarray:
-        """Ranges (m, float64) from (x, y) along map-frame ``angles`` (rad); inf = no hit."""
+        """Ranges (m, float64) from (x, y) along map-frame ``angles`` (rad); inf = no hit.
+
+        A ray origin outside the grid sees nothing (all inf)."""
         angles = np.asarray(angles, dtype=np.float64)
         n = angles.shape[0]
         out = np.full(n, np.inf)
         gx0, gy0 = self.to_grid(x, y)
+        if not (0.0 <= gx0 < self.width and 0.0 <= gy0 < self.height):
+            return out
         a = angles - self._oyaw
         dx_all, dy_all = np.cos(a), np.sin(a)
         tmax = max_range / self.res
@@ -125,38 +137,48 @@ class GridRaycaster:
             inv_dx = np.where(dx != 0.0, 1.0 / dx, HUGE)
             inv_dy = np.where(dy != 0.0, 1.0 / dy, HUGE)
         sx, sy = (dx >= 0).astype(np.float64), (dy >= 0).astype(np.float64)
-        codes, safe_flat, pw, w, h = self._codes, self._safe_flat, self._pad_w, self.width, self.height
+        codes, safe_flat, pw, off = self._codes, self._safe_flat, float(self._pad_w), float(self._pad_off)
+        alive = np.ones(n, dtype=bool)  # finished beams stay in the arrays, frozen, until compaction
+        n_alive = n
         for it in range(MAX_TRACE_ITERS):
-            if it >= TRACE_ITERS and idx.size <= SAMPLE_MAX_BEAMS:
+            if it >= TRACE_ITERS and n_alive <= SAMPLE_MAX_BEAMS:
                 break
             px, py = gx0 + t * dx, gy0 + t * dy
             ix, iy = np.floor(px), np.floor(py)
-            flat = ((np.clip(iy, -1, h) + 1) * pw + (np.clip(ix, -1, w) + 1)).astype(np.intp)
+            flat = (iy * pw + ix + off).astype(np.intp)  # steps never leave grid + PAD
             code = codes[flat]
-            done = (code != FREE_CODE) | (t > tmax)
-            if done.any():
-                hit = code == OCC_CODE
+            done = ((code != FREE_CODE) | (t > tmax)) & alive
+            n_done = int(np.count_nonzero(done))
+            if n_done:
+                hit = done & (code == OCC_CODE)
                 out[idx[hit]] = t[hit] * self.res
-                keep = ~done
-                idx, t, dx, dy = idx[keep], t[keep], dx[keep], dy[keep]
-                inv_dx, inv_dy, sx, sy = inv_dx[keep], inv_dy[keep], sx[keep], sy[keep]
-                px, py, ix, iy, flat = px[keep], py[keep], ix[keep], iy[keep], flat[keep]
-                if idx.size == 0:
+                alive &= ~done
+                n_alive -= n_done
+                if n_alive == 0:
                     break
+                if alive.size >= COMPACT_RATIO * n_alive:
+                    k = alive
+                    idx, t, dx, dy = idx[k], t[k], dx[k], dy[k]
+                    inv_dx, inv_dy, sx, sy = inv_dx[k], inv_dy[k], sx[k], sy[k]
+                    px, py, ix, iy, flat = px[k], py[k], ix[k], iy[k], flat[k]
+                    alive = np.ones(n_alive, dtype=bool)
             safe = safe_flat[flat]
             cross = np.minimum((ix + sx - px) * inv_dx, (iy + sy - py) * inv_dy)
-            t_free = t  # checked: free
-            t = t + np.where(safe >= MIN_SPHERE_STEP_CELLS, safe, cross + CROSS_EPS_CELLS)
-        if idx.size:
+            t_free = t  # checked: free (for the beams still alive)
+            t = t + np.where(safe >= MIN_SPHERE_STEP_CELLS, safe, cross + CROSS_EPS_CELLS) * alive
+        if n_alive:
             # Beams still going after TRACE_ITERS graze a wall: finish them by dense sampling
             # from their last position known to be free.
-            out[idx] = self._sample(gx0, gy0, dx_all[idx], dy_all[idx], t_free, tmax) * self.res
+            rest = idx[alive]
+            out[rest] = self._sample(gx0, gy0, dx_all[rest], dy_all[rest], t_free[alive], tmax) * self.res
         out[out > max_range] = np.inf
         return out
 
     def _code_at(self, ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
         """FREE/OCC/OUT code of integer-valued float cell indices (any shape)."""
-        flat = (np.clip(iy, -1, self.height) + 1) * self._pad_w + (np.clip(ix, -1, self.width) + 1)
+        flat = (np.clip(iy, -PAD, self.height + PAD - 1) + PAD) * self._pad_w + (
+            np.clip(ix, -PAD, self.width + PAD - 1) + PAD
+        )
         return self._codes[flat.astype(np.intp)]
 
     def _sample(
