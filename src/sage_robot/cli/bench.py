@@ -16,6 +16,9 @@ BENCHMARKS: dict[str, str] = {
     "voice": "sage_robot.bench.voice",
     "web": "sage_robot.bench.web",
     "slam": "sage_robot.bench.slam",
+    "nav": "sage_robot.bench.nav",
+    "localization": "sage_robot.bench.localization",
+    "planner": "sage_robot.bench.planner",
 }
 
 

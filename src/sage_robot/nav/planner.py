@@ -52,7 +52,12 @@ def _pool_max(cost: np.ndarray, f: int) -> np.ndarray:
     rows, cols = cost.shape
     pr, pc = -rows % f, -cols % f
     padded = np.pad(cost, ((0, pr), (0, pc)), constant_values=255)
-    return padded.reshape(padded.shape[0] // f, f, padded.shape[1] // f, f).max(axis=(1, 3))
+    out = padded[0::f, 0::f].copy()
+    for i in range(f):  # strided slices: far faster than a reshaped max over two axes
+        for j in range(f):
+            if i or j:
+                np.maximum(out, padded[i::f, j::f], out=out)
+    return out
 
 
 def weights_from_cost(cost: np.ndarray) -> np.ndarray:

@@ -1,0 +1,129 @@
+"""AMCL speed and convergence: update time at 500 and 2000 particles (60 beams), and the
+time to converge from global localization while the robot drives.
+
+Scans come from the simulator's ray caster on the map itself (1 % range noise, as the
+simulated RPLIDAR). Update times are wall-clock; convergence is in simulated seconds of
+driving at 0.5 m/s (a filter update every 0.25 m, as AMCL's ``update_min_d``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+UPDATES = 100  # timed filter updates per particle count
+DRIVE_SPEED_MPS = 0.5
+STEP_M = 0.25  # AMCL update_min_d: one filter update per step
+CONVERGED_M, CONVERGED_RAD = 0.5, 0.2
+TRIAL_STEPS = 80  # give up a convergence trial after this many updates (20 m)
+RANGE_NOISE = 0.01
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--map", default="", help="map YAML (default: the shipped building)")
+    p.add_argument("--beams", type=int, default=60, help="beams per update")
+    p.add_argument("--trials", type=int, default=5, help="global-localization trials")
+    p.add_argument("--seed", type=int, default=0, help="random seed")
+
+
+def _route(cm: Any, rng: np.random.Generator, cells: np.ndarray) -> np.ndarray:
+    """A drivable route of at least 20 m between two random free cells (x, y points)."""
+    from sage_robot.nav.planner import NoPath, plan, resample
+
+    for _ in range(50):
+        (r0, c0), (r1, c1) = cells[rng.integers(len(cells), size=2)]
+        s, g = cm.geom.to_world(r0, c0), cm.geom.to_world(r1, c1)
+        try:
+            p = plan(cm, (float(s[0]), float(s[1])), (float(g[0]), float(g[1])))
+        except NoPath:
+            continue
+        if p.length_m >= STEP_M * TRIAL_STEPS:
+            return resample(p.points, STEP_M)
+    raise RuntimeError("no route of 20 m found on this map")
+
+
+def _poses(route: np.ndarray) -> list[tuple[float, float, float]]:
+    d = np.diff(route, axis=0)
+    th = np.arctan2(d[:, 1], d[:, 0])
+    return [(float(x), float(y), float(t)) for (x, y), t in zip(route[1:], th, strict=True)]
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from scipy import ndimage
+
+    from sage_robot.core.config import Settings
+    from sage_robot.core.geometry import compose, wrap_angle
+    from sage_robot.nav.amcl import ParticleFilter
+    from sage_robot.nav.mapdata import load_for
+    from sage_robot.sim.raycast import GridRaycaster
+
+    settings = Settings.model_validate({"nav": {"map": args.map}})
+    data = load_for(settings)
+    lm = settings.robot.lidar
+    mount = (lm.x_m, lm.y_m, lm.yaw_rad)
+    caster = GridRaycaster(data.grid)
+    angles = -math.pi + 2 * math.pi / 360 * np.arange(360)
+    rng = np.random.default_rng(args.seed)
+    cm = data.costmap(settings.robot.radius_m, settings.nav.inflation_radius_m,
+                      settings.nav.cost_scaling_factor)
+    labels, _ = ndimage.label(cm.cost == 0)
+    cells = np.argwhere(labels == int(np.argmax(np.bincount(labels.ravel())[1:])) + 1)
+
+    def scan(pose: tuple[float, float, float]) -> np.ndarray:
+        lx, ly, lt = compose(pose, mount)
+        r = caster.cast(lx, ly, angles + lt, 12.0)
+        return (r * (1.0 + RANGE_NOISE * rng.standard_normal(len(r)))).astype(np.float64)
+
+    out: dict[str, Any] = {"bench": "localization", "map": str(data.path), "beams": args.beams}
+    poses = _poses(_route(cm, rng, cells))
+    for n in (500, 2000):
+        pf = ParticleFilter(data.grid, np.random.default_rng(args.seed), n, n, mount, args.beams)
+        pf.set_pose(*poses[0])
+        times, errs = [], []
+        odom = poses[0]
+        for k in range(UPDATES):
+            truth = poses[min(k + 1, len(poses) - 1)]
+            odom = truth  # perfect odometry here: this measures the filter's cost
+            r = scan(truth)
+            t = time.perf_counter()
+            pf.update(odom, angles, r, 12.0, force=True)
+            times.append(time.perf_counter() - t)
+            e = pf.estimate()
+            errs.append(math.hypot(e.x - truth[0], e.y - truth[1]))
+        a = np.array(times) * 1000
+        out[f"update_{n}"] = {"median_ms": round(float(np.median(a)), 2),
+                              "p95_ms": round(float(np.percentile(a, 95)), 2),
+                              "tracking_error_median_m": round(float(np.median(errs)), 3)}
+    trials = []
+    for _ in range(args.trials):
+        route = _poses(_route(cm, rng, cells))
+        pf = ParticleFilter(data.grid, rng, settings.nav.min_particles, settings.nav.max_particles, mount,
+                            args.beams)
+        t = time.perf_counter()
+        pf.global_localization((angles, scan(route[0]), 12.0))
+        init_s = time.perf_counter() - t
+        converged_at = None
+        for k, truth in enumerate(route[1:TRIAL_STEPS + 1], start=1):
+            pf.update(truth, angles, scan(truth), 12.0, force=True)
+            e = pf.estimate()
+            ok = (math.hypot(e.x - truth[0], e.y - truth[1]) < CONVERGED_M
+                  and abs(wrap_angle(e.theta - truth[2])) < CONVERGED_RAD and pf.spread_m() < CONVERGED_M)
+            if ok and converged_at is None:
+                converged_at = k
+            elif not ok:
+                converged_at = None
+        trials.append({"init_s": round(init_s, 2),
+                       "converged_after_m": None if converged_at is None else converged_at * STEP_M})
+    done = [t["converged_after_m"] for t in trials if t["converged_after_m"] is not None]
+    out["global_localization"] = {
+        "trials": len(trials),
+        "converged": len(done),
+        "median_distance_m": round(float(np.median(done)), 2) if done else None,
+        "median_time_s": round(float(np.median(done)) / DRIVE_SPEED_MPS, 1) if done else None,
+        "median_init_s": round(float(np.median([t["init_s"] for t in trials])), 2),
+    }
+    return out

@@ -1,0 +1,267 @@
+"""Navigation end to end: the simulated robot drives between places with people and clutter.
+
+Runs the simulator's world node (people, lidar, collisions) with the map_server,
+localization and navigator nodes on the simulated clock, and sends ``navigate_to`` goals:
+every ordered pair of places (an Eulerian circuit, so each leg starts where the last
+ended) or N random legs. Reports success rate, collisions, failures with reasons,
+time and path length against the shortest plan, and localization RMSE against truth.
+
+Wheel odometry here is derived from the simulated body with a scale error
+(``ODOM_SCALE_ERROR``): the pseudo-terminal MCU link runs in wall time and cannot keep pace
+with a faster-than-real-time clock.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import itertools
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+ODOM_SCALE_ERROR = 0.01  # wheel odometry reads 1 % long
+CLUTTER_HEIGHT_M = 1.0  # unmapped boxes as tall as this (the lidar sees them)
+CLUTTER_SIZE_M = (0.6, 0.4)
+CLUTTER_CLEARANCE_M = 1.2  # clutter stays this far from walls and places
+LEG_TIMEOUT_S = 300.0  # simulated seconds per leg before it counts as failed
+SAMPLE_PERIOD_S = 0.2  # localization error sampling (simulated s)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--map", default="", help="map YAML (default: the shipped building)")
+    p.add_argument("--waypoints", default="", help="waypoints YAML, own/Nav2 (default: beside the map)")
+    p.add_argument("--pedestrians", type=int, default=10, help="simulated people walking about")
+    p.add_argument("--clutter", type=int, default=0, help="unmapped boxes the world places")
+    p.add_argument("--pairs", default="all", help="'all' ordered pairs of places, or N random legs")
+    p.add_argument("--seed", type=int, default=7, help="world and goal seed")
+    p.add_argument("--speed", type=float, default=4.0, help="simulated time per wall second")
+
+
+def _circuit(n: int, start: int) -> list[int]:
+    """An Eulerian circuit of the complete directed graph on n nodes (Hierholzer)."""
+    edges = {i: [j for j in range(n) if j != i] for i in range(n)}
+    stack, path = [start], []
+    while stack:
+        v = stack[-1]
+        if edges[v]:
+            stack.append(edges[v].pop())
+        else:
+            path.append(stack.pop())
+    return path[::-1]
+
+
+def _clutter(settings: Any, k: int, rng: np.random.Generator, places: list[Any]) -> tuple[Any, ...]:
+    from scipy import ndimage
+
+    from sage_robot.core.mapio import read_map
+    from sage_robot.core.msgs.sim import LowObstacle
+    from sage_robot.core.paths import world_map_yaml
+
+    if k <= 0:
+        return ()
+    grid = read_map(world_map_yaml(settings))
+    clear = ndimage.distance_transform_edt(grid.data == 0) * grid.resolution
+    cells = np.argwhere(clear >= CLUTTER_CLEARANCE_M)
+    boxes: list[LowObstacle] = []
+    while len(boxes) < k and len(cells):
+        r, c = cells[rng.integers(len(cells))]
+        x = grid.origin.x + (c + 0.5) * grid.resolution
+        y = grid.origin.y + (r + 0.5) * grid.resolution
+        if all(math.hypot(p.pose.x - x, p.pose.y - y) > CLUTTER_CLEARANCE_M for p in places):
+            yaw = float(rng.uniform(0, math.pi))
+            boxes.append(LowObstacle(f"box{len(boxes)}", x, y, *CLUTTER_SIZE_M, yaw, CLUTTER_HEIGHT_M, "box"))
+    return tuple(boxes)
+
+
+def _settings(args: argparse.Namespace) -> Any:
+    from sage_robot.core.config import Settings
+    from sage_robot.nav.mapdata import load_for
+
+    base = {"map": args.map, "waypoints": args.waypoints}
+    places = load_for(Settings.model_validate({"nav": base})).places
+    if len(places) < 2:
+        from sage_robot.core.errors import ConfigError
+
+        raise ConfigError("the nav benchmark needs a waypoints file with two or more places")
+    start = "DOCKING_STATION" if "DOCKING_STATION" in places else places.names()[0]
+    return Settings.model_validate({
+        "nav": {**base, "initial_place": start},
+        "sim": {"world_map": args.map, "speed": args.speed, "seed": args.seed,
+                "pedestrians": args.pedestrians, "clutter": False, "camera_hz": 0},
+    }), list(places)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    from sage_robot.core.errors import ConfigError
+
+    settings, places = _settings(args)
+    names = [p.name for p in places]
+    rng = np.random.default_rng(args.seed)
+    start = names.index(settings.nav.initial_place)
+    if args.pairs == "all":
+        order = _circuit(len(names), start)
+    else:
+        try:
+            n = int(args.pairs)
+        except ValueError:
+            raise ConfigError(f"--pairs must be 'all' or a number, got {args.pairs!r}") from None
+        order = [start]
+        for _ in range(n):
+            order.append(int(rng.choice([i for i in range(len(names)) if i != order[-1]])))
+    legs = [(names[a], names[b]) for a, b in itertools.pairwise(order)]
+    clutter = _clutter(settings, args.clutter, rng, places)
+    t0 = time.perf_counter()
+    result = asyncio.run(_drive_all(settings, legs, clutter))
+    result["wall_s"] = round(time.perf_counter() - t0, 1)
+    return {"bench": "nav", "map": settings.nav.map or "default building", "pedestrians": args.pedestrians,
+            "clutter": args.clutter, "seed": args.seed, "speed": args.speed, **result}
+
+
+async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[Any, ...]) -> dict[str, Any]:
+    from sage_robot.app.launcher import Launcher, NodeSpec
+    from sage_robot.app.runtime import make_context
+    from sage_robot.core.clock import SimClock
+    from sage_robot.nav.localization import LocalizationNode
+    from sage_robot.nav.map_server import MapServerNode
+    from sage_robot.nav.navigator import NavigatorNode
+    from sage_robot.sim.node import SCENARIO_RESOURCE, WorldNode
+    from sage_robot.sim.scenario import Scenario
+
+    ctx = make_context(settings, simulated=True)
+    ctx.resources[SCENARIO_RESOURCE] = Scenario(name="bench_nav", clutter=clutter, default_clutter=False)
+    specs = [NodeSpec("sim_world", WorldNode, True), NodeSpec("wheel_odometry", _OdometryNode, True),
+             NodeSpec("map_server", MapServerNode, False), NodeSpec("localization", LocalizationNode, False),
+             NodeSpec("navigator", NavigatorNode, True)]
+    launcher = Launcher(ctx, specs)
+    ctx.resources["launcher"] = launcher
+    await launcher.start()
+    clock = ctx.clock
+    assert isinstance(clock, SimClock)
+    hooks = ctx.resources["sim_step_hooks"]
+
+    def physics(dt: float) -> None:
+        for hook in hooks:
+            hook(dt)
+
+    stop = asyncio.Event()
+    from sage_robot.app.runtime import SIM_STEP_S
+
+    stepper = asyncio.get_running_loop().create_task(
+        clock.run(SIM_STEP_S, settings.sim.speed, None, stop, physics))
+    try:
+        deadline = clock.now() + 60.0
+        while not all(launcher.health[s.name].state.value == "running" for s in specs):
+            if clock.now() > deadline:
+                raise RuntimeError(f"nodes did not start: {launcher.health_report()}")
+            await clock.sleep(0.1)
+        return await _legs(ctx, launcher, legs)
+    finally:
+        stop.set()
+        await asyncio.wait({stepper}, timeout=10)
+        await launcher.stop()
+
+
+async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]]) -> dict[str, Any]:
+    from sage_robot.core import topics
+    from sage_robot.core.geometry import wrap_angle
+    from sage_robot.core.msgs.nav import NavigateGoal
+    from sage_robot.nav.planner import NoPath, plan
+
+    clock, bus = ctx.clock, ctx.bus
+    world = ctx.resources["sim_world"]
+    nav = launcher.nodes["navigator"]
+    static = nav.data.costmap(ctx.settings.robot.radius_m, ctx.settings.nav.inflation_radius_m,
+                              ctx.settings.nav.cost_scaling_factor)
+    errs_m: list[float] = []
+    errs_deg: list[float] = []
+
+    async def sample() -> None:
+        while True:
+            await clock.sleep(SAMPLE_PERIOD_S)
+            est = nav.pose()
+            if est is not None:
+                errs_m.append(math.hypot(est[0] - world.x, est[1] - world.y))
+                errs_deg.append(math.degrees(abs(wrap_angle(est[2] - world.theta))))
+
+    sampler = asyncio.get_running_loop().create_task(sample())
+    await clock.sleep(1.0)
+    records, failures = [], []
+    for a, b in legs:
+        goal = nav.data.places.get(b).pose
+        c0, d0, t0 = world.collisions, world.distance_m, clock.now()
+        try:
+            shortest = plan(static, (world.x, world.y), (goal.x, goal.y)).length_m
+        except NoPath:
+            shortest = math.nan
+        handle = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=b))
+        try:
+            res = await clock.wait_for(handle.result(), LEG_TIMEOUT_S)
+            ok, why = res.ok, res.message
+        except asyncio.TimeoutError:
+            await handle.cancel()
+            ok, why = False, f"timed out after {LEG_TIMEOUT_S:g} s"
+        rec = {"from": a, "to": b, "ok": ok, "collisions": world.collisions - c0,
+               "time_s": round(clock.now() - t0, 1), "length_m": round(world.distance_m - d0, 2),
+               "shortest_m": round(shortest, 2)}
+        records.append(rec)
+        if not ok:
+            failures.append({"from": a, "to": b, "reason": why})
+    sampler.cancel()
+    good = [r for r in records if r["ok"] and r["shortest_m"] > 0]
+    em, ed = np.array(errs_m or [math.nan]), np.array(errs_deg or [math.nan])
+    return {
+        "legs": len(records),
+        "success_rate": round(sum(r["ok"] for r in records) / max(1, len(records)), 3),
+        "collisions": int(sum(r["collisions"] for r in records)),
+        "failures": failures,
+        "path_length_vs_shortest": round(float(np.median([r["length_m"] / r["shortest_m"] for r in good])), 3)
+        if good else None,
+        "median_leg_time_s": round(float(np.median([r["time_s"] for r in good])), 1) if good else None,
+        "mean_speed_mps": round(sum(r["length_m"] for r in good)
+                                / max(1e-9, sum(r["time_s"] for r in good)), 3),
+        "localization_rmse_m": round(float(np.sqrt(np.mean(em**2))), 3),
+        "localization_rmse_deg": round(float(np.sqrt(np.mean(ed**2))), 2),
+        "sim_time_s": round(clock.now(), 1),
+    }
+
+
+def _odometry_node() -> Any:
+    from sage_robot.core import topics
+    from sage_robot.core.geometry import compose, relative
+    from sage_robot.core.msgs import Odometry, Pose2D, Twist
+    from sage_robot.core.node import Node
+
+    class OdometryNode(Node):
+        """Wheel odometry from the simulated body's true motion, reading ODOM_SCALE_ERROR long."""
+
+        name = "wheel_odometry"
+
+        async def setup(self) -> None:
+            self._last: tuple[float, float, float] | None = None
+            self._odom = (0.0, 0.0, 0.0)
+            self.subscribe(topics.SIM_TRUTH, Odometry, self._on_truth, maxsize=100)
+
+        def _on_truth(self, msg: Odometry) -> None:
+            pose = msg.pose.as_tuple()
+            if self._last is not None:
+                dx, dy, dth = relative(self._last, pose)
+                k = 1.0 + ODOM_SCALE_ERROR
+                self._odom = compose(self._odom, (dx * k, dy * k, dth))
+            self._last = pose
+            twist = Twist(msg.twist.linear_x * (1.0 + ODOM_SCALE_ERROR), msg.twist.angular_z)
+            self.bus.publish(topics.ODOM, Odometry(msg.stamp, Pose2D(*self._odom), twist))
+
+    return OdometryNode
+
+
+class _Lazy:
+    """Builds the odometry node class on first use, so importing this module stays light."""
+
+    def __call__(self, ctx: Any) -> Any:
+        return _odometry_node()(ctx)
+
+
+_OdometryNode = _Lazy()
