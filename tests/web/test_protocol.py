@@ -254,3 +254,9 @@ def test_a_growing_map_reaches_the_page(robot: Any, client: httpx.Client, cookie
     png = client.get(second["url"], headers={"Cookie": cookie})
     assert png.status_code == 200 and png.headers["content-type"] == "image/png"
     assert Image.open(io.BytesIO(png.content)).size == (50, 30)
+
+
+def test_oversized_upload_is_refused_before_it_is_read(client: httpx.Client) -> None:
+    big = b"\0" * (6 * 1024 * 1024)
+    resp = client.post("/api/talk/audio", files={"audio": ("long.webm", big, "audio/webm")})
+    assert resp.status_code == 413 and "over" in resp.json()["error"]

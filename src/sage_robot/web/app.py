@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
+from typing import Any
 from urllib.parse import quote
 
 from fastapi import FastAPI, HTTPException, Request
@@ -19,6 +20,8 @@ from sage_robot.web import admin, api, sockets, talk
 from sage_robot.web.auth import SESSION_COOKIE
 from sage_robot.web.common import WebState, client_key, is_operator, json_body, state_of
 
+UPLOAD_SLACK_BYTES = 64 * 1024  # multipart headers around an upload
+KB_UPLOAD_LIMIT_BYTES = 200 * 1024 * 1024  # several documents at once (the KB checks each file)
 PUBLIC_PAGES = {"/": "index.html", "/face": "face.html", "/talk": "talk.html", "/login": "login.html"}
 OPERATOR_PAGES = {"/teleop": "teleop.html", "/admin": "admin.html"}
 
@@ -32,6 +35,18 @@ def static_dir() -> Path:
 def create_app(state: WebState) -> FastAPI:
     app = FastAPI(title="SAGE", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.web = state
+
+    @app.middleware("http")
+    async def limit_body(request: Request, call_next: Any) -> Response:
+        """Refuse oversized bodies before they are read (uploads are spooled to disk)."""
+        length = request.headers.get("content-length", "")
+        limit = talk.MAX_UPLOAD_BYTES + UPLOAD_SLACK_BYTES
+        if request.url.path.startswith("/api/kb/"):
+            limit = KB_UPLOAD_LIMIT_BYTES
+        if length.isdigit() and int(length) > limit:
+            return JSONResponse({"error": f"request body over {limit} bytes"}, status_code=413)
+        return await call_next(request)
+
     _add_error_handlers(app)
     _add_pages(app)
     app.include_router(api.router)

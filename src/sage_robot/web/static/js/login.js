@@ -3,7 +3,8 @@ import { $, api } from "./common.js";
 
 function nextPage() {
   const next = new URLSearchParams(location.search).get("next") || "/teleop";
-  return next.startsWith("/") && !next.startsWith("//") ? next : "/teleop";
+  // only a path on this server: "//host" and "/\\host" would leave it
+  return /^\/(?![\/\\])/.test(next) && !next.includes("\\") ? next : "/teleop";
 }
 
 $("form").addEventListener("submit", async (ev) => {
