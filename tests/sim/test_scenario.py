@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import subprocess
 import sys
@@ -193,3 +194,32 @@ async def test_scenario_battery_reaches_the_firmware_model() -> None:
     launcher = await run_launcher(ctx, specs, until=2.0)
     charge = launcher.nodes["mcu_sim"].firmware.battery.charge  # type: ignore[attr-defined]
     assert charge == pytest.approx(0.3, abs=0.001)
+
+
+async def test_a_failing_physics_step_restarts_the_node_and_keeps_the_world() -> None:
+    settings = load_profile(None, {"sim": {"speed": None, "camera_hz": 0, "pedestrians": 0}})
+    ctx = make_context(settings, simulated=True)
+    calls = {"n": 0}
+
+    async def break_once(launcher: Any) -> None:
+        for _ in range(100):  # the node's setup runs on the next loop turns
+            if WORLD_RESOURCE in ctx.resources:
+                break
+            await asyncio.sleep(0)
+        world = ctx.resources[WORLD_RESOURCE]
+        real_step = world.step
+
+        def step(dt: float) -> None:
+            calls["n"] += 1
+            if calls["n"] == 50:
+                raise ValueError("boom")
+            real_step(dt)
+
+        world.step = step
+
+    launcher = await run_launcher(
+        ctx, [NodeSpec("sim_world", WorldNode, True)], until=3.0, after_start=break_once
+    )
+    health = launcher.health["sim_world"]
+    assert health.restarts == 1 and "boom" in health.last_error
+    assert calls["n"] > 100  # the same world kept stepping after the restart

@@ -16,6 +16,7 @@ It also plays a scenario's timed events (``ctx.resources["sim_scenario"]``).
 
 from __future__ import annotations
 
+import asyncio
 import math
 import time
 from typing import Any
@@ -56,8 +57,11 @@ class WorldNode(Node):
         self.world: World = world
         self.world.on_collision[:] = [self._on_collision]
         self.summary: dict[str, Any] = self.ctx.resources.setdefault(SUMMARY_RESOURCE, {"goals": []})
+        self._failed = asyncio.Event()
+        self._error: BaseException | None = None
         self._hooks: list[Any] = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
         self._hooks.insert(0, self._physics)
+        self.spawn(self._watch(), name="sim_world.watch")
         launcher = self.ctx.resources.get("launcher")
         names = [s.name for s in getattr(launcher, "specs", [])]
         self.direct_drive = MCU_NODE not in names
@@ -119,6 +123,21 @@ class WorldNode(Node):
 
     # ---------------------------------------------------------------- the step
     def _physics(self, dt: float) -> None:
+        """The hook: a failure here fails this node (restarted by the launcher, world kept)
+        instead of stopping the simulator's clock."""
+        try:
+            self._step(dt)
+        except Exception as exc:
+            if self._physics in self._hooks:
+                self._hooks.remove(self._physics)
+            self._error = exc
+            self._failed.set()
+
+    async def _watch(self) -> None:
+        await self._failed.wait()
+        raise RuntimeError(f"physics step failed: {self._error!r}") from self._error
+
+    def _step(self, dt: float) -> None:
         now = self.clock.now()
         if self._battery_pending is not None:
             self._apply_battery()
