@@ -15,7 +15,13 @@ from typing import Any
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--log", required=True, help="CARMEN log (.clf, .log, .gz)")
+    p.add_argument("--log", help="CARMEN log (.clf, .log, .gz)")
+    p.add_argument(
+        "--sim",
+        action="store_true",
+        help="instead: map the shipped building by a scripted drive and compare with the truth",
+    )
+    p.add_argument("--sim-length", type=float, help="with --sim: stop the drive after this many metres")
     p.add_argument("--relations", help="Kümmerle relations file for the log")
     p.add_argument("--limit", type=int, help="only the first N scans")
     p.add_argument(
@@ -45,6 +51,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.nav.slam.relations import Relation, read_relations, relation_error
     from sage_robot.nav.slam.replay import replay_log
 
+    if args.sim:
+        from sage_robot.bench.slam_sim import run_check
+
+        return {"bench": "slam_sim", **run_check(args.sim_length, args.seed)}
+    if not args.log:
+        raise ConfigError("give --log LOG (with --relations REL or --self-reference), or --sim")
     if not args.relations and not args.self_reference:
         raise ConfigError("give --relations REL, or --self-reference for a corrected log")
     log = read_log(args.log)

@@ -43,7 +43,7 @@ class SlamConfig:
     keyframe_angle_rad: float = 0.2  # ...or this much turning
     local_keyframes: int = 25  # keyframes in the local map
     search_xy_m: float = 0.25  # correlative search window around the prediction (±)
-    search_theta_rad: float = 0.12  # (±)
+    search_theta_rad: float = 0.3  # (±): wheel odometry turns badly (MIT CSAIL: 0.1 rad per 0.4 s)
     search_theta_step_rad: float = 0.01
     min_track_inliers: float = 0.3  # below this the match is not trusted: dead-reckon
     prior_sigma_xy_m: float = 0.3  # pull of the odometry prediction in ICP (weak)

@@ -102,9 +102,11 @@ class OccupancyMapper:
         flat = cells[:, 1] * width + cells[:, 0]
         end_cells = np.floor((p1 - self.origin) / res).astype(np.int64)
         end_flat = end_cells[:, 1] * width + end_cells[:, 0]
-        # A beam's own end cell is not cleared by it; one update per beam and cell.
+        # A beam's own end cell is not cleared by it; samples along a beam are in order, so
+        # one update per beam and cell = drop a sample in the same cell as the one before.
         keep = flat != end_flat[beam]
-        key = np.unique(beam[keep] * (height * width) + flat[keep]) % (height * width)
+        keep[1:] &= (flat[1:] != flat[:-1]) | (beam[1:] != beam[:-1])
+        key = flat[keep]
         free = np.bincount(key, minlength=height * width)
         occ = np.bincount(end_flat[hit], minlength=height * width)
         upd = (L_FREE * free + L_OCC * occ).reshape(height, width).astype(np.float32)
