@@ -185,3 +185,13 @@ def test_camera_gives_a_480x270_jpeg_that_changes_when_turning() -> None:
 def test_a_start_inside_a_wall_is_refused() -> None:
     with pytest.raises(ValueError, match="overlaps wall"):
         hall_world(start=(0.6, 2.0, 0.0))
+
+
+def test_the_approacher_does_not_chase_a_moving_robot() -> None:
+    comer = PersonState(0, 6.0, 2.0, math.pi, "approacher", speed_mps=1.0, start_s=0.0, stay_s=30.0)
+    w = hall_world(people=[comer], start=(1.0, 3.0, 0.0))
+    drive_for(w, 1.0, 0.4, 0.4)  # the robot is moving: the visitor waits
+    assert (comer.x, comer.y) == (6.0, 2.0) and comer.behaviour == "approacher"
+    drive_for(w, 4.0, 0.0, 0.0)  # stopped: they come and stand in front
+    assert math.hypot(comer.x - (w.x + 1.0), comer.y - w.y) < 0.3
+    assert comer.stay_until > w.t

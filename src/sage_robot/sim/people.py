@@ -32,6 +32,7 @@ STAND_S = (4.0, 15.0)  # a walker who stops stands this long
 STOP_PROBABILITY = 0.15  # chance a walker stops at each waypoint
 APPROACH_STOP_M = 1.0  # the approacher stops this far from the robot's centre
 APPROACH_DELAY_S = (3.0, 15.0)
+APPROACH_MAX_ROBOT_MPS = 0.2  # the approacher only walks up to a robot slower than this
 APPROACH_STAY_S = (30.0, 60.0)
 WALL_MARGIN_M = 0.05  # people keep their body this far clear of walls
 ARRIVE_M = 0.15
@@ -138,6 +139,7 @@ class Crowd:
         self.people, self.lanes, self.clearance, self.rng = people, lanes, clearance, rng
         self.line_of_sight = line_of_sight  # (x0, y0, x1, y1) -> bool, for the approacher
         self.is_free: Any = None  # (x, y) -> bool: known-free floor (random targets stay on it)
+        self.robot_speed = 0.0  # m/s, set by the world each step (the approacher waits for a stop)
 
     # ---------------------------------------------------------------- geometry
     def bodies(self) -> np.ndarray:
@@ -193,6 +195,11 @@ class Crowd:
     ) -> tuple[float, float] | None:
         if t < p.start_s:
             return None
+        if p.stay_until < 0.0 and self.robot_speed > APPROACH_MAX_ROBOT_MPS:
+            if p.planned:  # the robot drove off while they came: they walk on
+                p.behaviour = "walker"
+                p.route.clear()
+            return None  # else wait until it stands still
         if p.stay_until >= 0.0:
             if t < p.stay_until:
                 return None

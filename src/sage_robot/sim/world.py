@@ -160,6 +160,7 @@ class World:
     # ---------------------------------------------------------------- people
     def step(self, dt: float) -> None:
         """Advance the world's own time and its people by ``dt`` s."""
+        self.crowd.robot_speed = abs(self.v)
         self.crowd.step(dt, self.t, self.pose, self.robot_radius)
         self.t += dt
 
