@@ -17,11 +17,13 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePath
 
+import numpy as np
+
 from sage_robot.core.config.areas import KbSettings
 from sage_robot.core.errors import SageError
 from sage_robot.core.msgs.kb import Passage
 from sage_robot.kb.chunk import chunk_blocks
-from sage_robot.kb.embed import Embedder, make_embedder
+from sage_robot.kb.embed import CachedEmbedder, Embedder, make_embedder
 from sage_robot.kb.extract import READERS, IngestError, extract
 from sage_robot.kb.store.base import NewChunk, NewDocument, Store, query_terms
 
@@ -31,6 +33,10 @@ MAX_TOP_K = 50
 MAX_QUERY_CHARS = 2000
 CORPUS_DIR = Path(__file__).resolve().parents[1] / "data" / "kb"
 CORPUS_PREFIX = "corpus/"  # source names of the shipped documents
+# Vectors of the shipped corpus's chunks, made by `python -m sage_robot.kb.corpus_vectors`
+# (a test checks they are current), so the first run ingests in a second, not in minutes on
+# a slow CPU.
+CORPUS_VECTORS = CORPUS_DIR / "vectors.npz"
 
 
 class SearchError(SageError):
@@ -92,22 +98,24 @@ class KbService:
         self.store.close()
 
     # ---------------------------------------------------------------- ingest
-    def ingest_bytes(self, data: bytes, name: str, source: str | None = None) -> IngestResult:
+    def ingest_bytes(
+        self, data: bytes, name: str, source: str | None = None, embedder: Embedder | None = None
+    ) -> IngestResult:
         """Ingest one document; a changed one replaces its chunks, an unchanged one is skipped."""
         source = source or name
         try:
-            return self._ingest(data, name, source)
+            return self._ingest(data, name, source, embedder or self.embedder)
         except IngestError as exc:
             return IngestResult(source, "failed", message=str(exc))
 
-    def _ingest(self, data: bytes, name: str, source: str) -> IngestResult:
+    def _ingest(self, data: bytes, name: str, source: str, embedder: Embedder) -> IngestResult:
         digest = hashlib.sha256(data).hexdigest()
         old = self.store.document_by_source(source)
         if old is not None and old.sha256 == digest:
             return IngestResult(source, "unchanged", old.id, old.chunks, old.pages)
         doc = extract(data, name)
         chunks = chunk_blocks(doc.blocks)
-        vectors = self.embedder.embed([_embed_text(doc.title, c.section, c.text) for c in chunks])
+        vectors = embedder.embed([embed_text(doc.title, c.section, c.text) for c in chunks])
         info = self.store.replace_document(
             NewDocument(source, doc.title, digest, PurePath(name).suffix.lower().lstrip("."),
                         doc.pages, len(data), time.time()),
@@ -117,13 +125,15 @@ class KbService:
         status = "replaced" if old is not None else "added"
         return IngestResult(source, status, info.id, info.chunks, info.pages)
 
-    def ingest_file(self, path: Path, source: str | None = None) -> IngestResult:
+    def ingest_file(
+        self, path: Path, source: str | None = None, embedder: Embedder | None = None
+    ) -> IngestResult:
         source = source or str(path.resolve())
         try:
             data = path.read_bytes()
         except OSError as exc:
             return IngestResult(source, "failed", message=f"{path}: cannot read ({exc.strerror})")
-        return self.ingest_bytes(data, path.name, source)
+        return self.ingest_bytes(data, path.name, source, embedder)
 
     def ingest_paths(
         self, paths: Iterable[Path], progress: Callable[[Path], None] | None = None
@@ -136,16 +146,22 @@ class KbService:
                 progress(path)
         return results
 
+    @staticmethod
+    def corpus_files(folder: Path = CORPUS_DIR) -> dict[str, Path]:
+        """The shipped documents by source name (``corpus/places/cafe.md``)."""
+        return {CORPUS_PREFIX + p.relative_to(folder).as_posix(): p for p in sorted(folder.rglob("*.md"))}
+
     def ensure_corpus(self, folder: Path = CORPUS_DIR) -> list[IngestResult]:
         """First run (empty store): ingest the shipped corpus. Later runs: refresh the shipped
         documents the store still has (a new SAGE version may have edited them; unchanged
         ones cost a hash), without re-adding the ones an operator deleted."""
-        files = {CORPUS_PREFIX + p.relative_to(folder).as_posix(): p for p in sorted(folder.rglob("*.md"))}
+        files = self.corpus_files(folder)
         docs = self.store.list_documents()
         if docs:
             present = {d.source for d in docs}
             files = {source: path for source, path in files.items() if source in present}
-        return [self.ingest_file(path, source) for source, path in files.items()]
+        cached = CachedEmbedder(self.embedder, load_corpus_vectors(self.embedder.name))
+        return [self.ingest_file(path, source, cached) for source, path in files.items()]
 
     # ---------------------------------------------------------------- search
     def search(self, query: str, top_k: int = 5) -> list[Passage]:
@@ -184,7 +200,17 @@ class KbService:
         return self.store.delete_document(document_id)
 
 
-def _embed_text(title: str, section: str, text: str) -> str:
+def load_corpus_vectors(embedder_name: str, path: Path = CORPUS_VECTORS) -> dict[str, np.ndarray]:
+    """The shipped corpus's vectors by text key, if they were made with this embedder."""
+    if not path.is_file():
+        return {}
+    with np.load(path) as data:
+        if str(data["embedder"]) != embedder_name:
+            return {}
+        return dict(zip((str(k) for k in data["keys"]), data["vectors"], strict=True))
+
+
+def embed_text(title: str, section: str, text: str) -> str:
     """What the model sees for a chunk: where it is from, then the chunk."""
     where = section if section.startswith(title) else f"{title} > {section}" if section else title
     return f"{where}: {text}"
