@@ -95,6 +95,8 @@ def test_every_page_loads_without_console_errors(operator: Any, robot: Any) -> N
         console = Console(page)
         page.goto(f"{robot.url}{path}")
         page.wait_for_selector(selector, timeout=WAIT_S * 1000, state="attached")
+        if path == "/teleop":  # the simulated camera's JPEG frames arrive over /ws/camera
+            page.wait_for_function("document.getElementById('camera').src.startsWith('blob:')")
         page.wait_for_timeout(600)  # let the sockets deliver a first round
         name = path.strip("/") or "index"
         page.screenshot(path=str(robot.artifacts / f"{name}.png"))
@@ -118,6 +120,25 @@ def test_holding_arrow_up_drives_and_releasing_stops(operator: Any, robot: Any) 
     rest = odom_xy(robot)
     time.sleep(0.5)
     assert moved_from(robot, rest) < 0.02, "the robot kept moving after the key was released"
+    page.close()
+    assert console.errors == []
+
+
+def test_joystick_and_gas_pedal_drive_and_stop(operator: Any, robot: Any) -> None:
+    page, console = open_teleop(operator, robot)
+    for selector in ("#joystick", "#throttle"):
+        wait_until(lambda: stopped(robot), what="a still robot")
+        start = odom_xy(robot)
+        box = page.locator(selector).bounding_box()
+        assert box is not None
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        if selector == "#joystick":
+            page.mouse.move(cx, cy - box["height"] * 0.4, steps=4)  # push forward
+        wait_until(lambda s=start: moved_from(robot, s) > MOVED_M, what=f"{selector} to drive")
+        page.mouse.up()
+        wait_until(lambda: stopped(robot), what=f"the robot to stop after releasing {selector}")
     page.close()
     assert console.errors == []
 
@@ -184,6 +205,35 @@ def test_click_on_the_map_sends_a_goal_and_the_robot_moves(operator: Any, robot:
     page.screenshot(path=str(robot.artifacts / "teleop-goal.png"))
     page.click("#cancel")
     wait_until(lambda: stopped(robot), what="the robot to stop after cancel")
+    page.close()
+    assert console.errors == []
+
+
+def test_drag_on_the_map_sets_the_initial_pose(operator: Any, robot: Any) -> None:
+    from sage_robot.core.msgs import PoseWithCovariance
+
+    got: list[PoseWithCovariance] = []
+    sub = robot.call(lambda: robot.bus.subscribe(topics.INITIAL_POSE, PoseWithCovariance, got.append))
+    page, console = open_teleop(operator, robot)
+    page.wait_for_selector("#map[data-map-version]", timeout=WAIT_S * 1000)
+    pose = wait_until(lambda: robot.web_node().hub.robot_pose, what="the robot's pose")
+    box = page.locator("#map").bounding_box()
+    assert box is not None
+    # drag from where the robot is, along its heading: localization stays where it was
+    x, y, theta = pose
+    ahead = (x + 3.0 * math.cos(theta), y + 3.0 * math.sin(theta))
+    p0 = page.evaluate(f"window.sageMap.toPx({x}, {y})")
+    p1 = page.evaluate(f"window.sageMap.toPx({ahead[0]}, {ahead[1]})")
+    page.mouse.move(box["x"] + p0[0], box["y"] + p0[1])
+    page.mouse.down()
+    page.mouse.move(box["x"] + p1[0], box["y"] + p1[1], steps=5)
+    page.mouse.up()
+    wait_until(lambda: got, what="an /initialpose message")
+    robot.call(sub.close)
+    msg = got[-1]
+    assert msg.frame_id == "map"
+    assert math.hypot(msg.pose.x - x, msg.pose.y - y) < 0.5
+    assert abs(math.remainder(msg.pose.theta - theta, 2 * math.pi)) < 0.2
     page.close()
     assert console.errors == []
 
