@@ -195,3 +195,18 @@ def test_the_approacher_does_not_chase_a_moving_robot() -> None:
     drive_for(w, 4.0, 0.0, 0.0)  # stopped: they come and stand in front
     assert math.hypot(comer.x - (w.x + 1.0), comer.y - w.y) < 0.3
     assert comer.stay_until > w.t
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_groups_stand_clear_of_the_way_into_a_room(seed: int) -> None:
+    w = build_world(load_profile(None, {"sim": {"seed": seed, "pedestrians": 6}}))
+    lanes = w.crowd.lanes
+    assert lanes is not None
+    spurs = [(a, b) for a in range(len(lanes.nodes)) for b, half in lanes.adj[a] if half < 0.5 and a < b]
+    assert len(spurs) == 15  # a door-to-place spur per room with a place
+    for p in (p for p in w.crowd.people if p.behaviour == "group"):
+        for a, b in spurs:
+            pa, pb = lanes.nodes[a], lanes.nodes[b]
+            f = np.clip(np.dot([p.x, p.y] - pa, pb - pa) / np.dot(pb - pa, pb - pa), 0.0, 1.0)
+            gap = float(np.hypot(*([p.x, p.y] - (pa + f * (pb - pa)))))
+            assert gap > 0.25 + 0.25 + 0.1, (p.x, p.y)  # the robot passes along the spur

@@ -110,13 +110,13 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
         hit = raycaster.cast(x0, y0, np.array([math.atan2(y1 - y0, x1 - x0)]), d + 0.1)[0]
         return bool(hit >= d)
 
-    place_xys = [(p.pose.x, p.pose.y) for p in places if p.name != settings.nav.initial_place]
+    place_poses = [p.pose.as_tuple() for p in places if p.name != settings.nav.initial_place]
     people += spawn_crowd(
         sim.pedestrians,
         rng,
         start[:2],
         lanes,
-        place_xys,
+        place_poses,
         raycaster.clearance,
         sample_free,
         line_of_sight,

@@ -23,7 +23,8 @@ from sage_robot.sim.people import (
 MIX = ("walker", "stander", "approacher", "group")  # then walkers
 GROUP_SIZE = 3
 GROUP_RING_M = 0.55  # members stand on a circle this wide around the group's centre
-GROUP_FROM_PLACE_M = (1.5, 2.5)
+GROUP_FROM_PLACE_M = (1.5, 2.5)  # a group stands this far beyond a place...
+GROUP_SPREAD_RAD = math.pi / 3  # ...within this angle of the direction the place faces
 APPROACHER_FROM_ROBOT_M = (3.0, 10.0)
 SPAWN_TRIES = 200
 BEHAVIOURS = ("walker", "stander", "group", "approacher")
@@ -39,13 +40,15 @@ def spawn_crowd(
     rng: np.random.Generator,
     robot_xy: tuple[float, float],
     lanes: Lanes | None,
-    place_xys: list[tuple[float, float]],
+    places: list[tuple[float, float, float]],
     clearance: Clearance,
     sample_free: SampleFree,
     line_of_sight: LineOfSight,
     robot_yaw: float = 0.0,
 ) -> list[PersonState]:
-    """``n`` people, in the mix walker, stander, approacher, a group of three, then walkers."""
+    """``n`` people, in the mix walker, stander, approacher, a group of three, then walkers.
+
+    ``places`` are (x, y, facing) of the named places (groups gather beyond one of them)."""
     people: list[PersonState] = []
 
     def clear(x: float, y: float, need: float) -> bool:
@@ -73,9 +76,9 @@ def spawn_crowd(
         k += 1
         pid = len(people)
         heading = float(rng.uniform(-math.pi, math.pi))
-        if kind == "group" and place_xys:
+        if kind == "group" and places:
             size = min(GROUP_SIZE, n - len(people))
-            people += _group(pid, size, rng, place_xys, clear, far)
+            people += _group(pid, size, rng, places, clear, far)
             continue
         if kind == "approacher":
             # Somewhere in sight of the spot in front of the robot where they will stand.
@@ -108,13 +111,15 @@ def _group(
     pid: int,
     size: int,
     rng: np.random.Generator,
-    place_xys: list[tuple[float, float]],
+    places: list[tuple[float, float, float]],
     clear: Callable[[float, float, float], bool],
     far: Callable[[float, float], bool],
 ) -> list[PersonState]:
     for _ in range(SPAWN_TRIES):
-        px, py = place_xys[int(rng.integers(len(place_xys)))]
-        a, r = float(rng.uniform(-math.pi, math.pi)), float(rng.uniform(*GROUP_FROM_PLACE_M))
+        px, py, facing = places[int(rng.integers(len(places)))]
+        # Beyond the place as one arrives (places face into their rooms): not in the doorway.
+        a = facing + float(rng.uniform(-GROUP_SPREAD_RAD, GROUP_SPREAD_RAD))
+        r = float(rng.uniform(*GROUP_FROM_PLACE_M))
         cx, cy = px + r * math.cos(a), py + r * math.sin(a)
         if clear(cx, cy, GROUP_RING_M + PERSON_RADIUS_M + 0.1) and far(cx, cy):
             break
