@@ -9,6 +9,7 @@ Conventions
   centre here means touching), 254 lethal, 255 unknown.
 - Inflation (Nav2 ``InflationLayer``): at distance ``d`` from the nearest lethal cell,
   ``d <= inscribed``: 253; ``d <= inflation_radius``: ``252 * exp(-k (d - inscribed))``.
+  Obstacles seen by the scan (not in the map) count ``OBSTACLE_PAD_M`` nearer.
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ OCCUPIED_MIN = 65  # map cell value (0..100) from which a cell is an obstacle (m
 OBSTACLE_RANGE_M = 5.0  # Nav2 obstacle_max_range: beams beyond this mark nothing
 RAYTRACE_RANGE_M = 6.0  # Nav2 raytrace_max_range: free space is cleared up to here
 NO_SPEED_LIMIT = 1.0
+# Scan obstacles are padded by this much: a lidar at knee height sees a person's legs
+# (~0.07 m circles 0.11 m either side of the body's centre), not the 0.25 m body around them.
+OBSTACLE_PAD_M = 0.2
 
 
 @dataclass(frozen=True)
@@ -208,8 +212,9 @@ class Costmap:
         r0, r1 = max(rr.min() - pad, 0), min(rr.max() + pad + 1, self.geom.shape[0])
         c0, c1 = max(cc.min() - pad, 0), min(cc.max() + pad + 1, self.geom.shape[1])
         lethal = self.obstacles[r0:r1, c0:c1]
-        cost, dist = inflate(lethal, self.geom.resolution, self.inscribed_m, self.inflation_m,
-                             self.cost_scaling)
+        cost, dist = inflate(lethal, self.geom.resolution, self.inscribed_m + OBSTACLE_PAD_M,
+                             self.inflation_m + OBSTACLE_PAD_M, self.cost_scaling)
+        dist = np.maximum(dist - OBSTACLE_PAD_M, 0.0)
         self.cost[r0:r1, c0:c1] = np.maximum(self.cost[r0:r1, c0:c1], cost)
         self.dist[r0:r1, c0:c1] = np.minimum(self.dist[r0:r1, c0:c1], dist)
 
