@@ -301,6 +301,31 @@ def test_talk_typed_question_gets_a_reply(browser: Any, robot: Any) -> None:
     assert [e for e in console.errors if "/api/talk/say" not in e] == []
 
 
+def test_talk_hold_to_talk_records_and_uploads(browser: Any, robot: Any) -> None:
+    """Chromium's fake microphone (a beep) -> MediaRecorder WebM -> /api/talk/audio -> ffmpeg
+    -> speech to text. A beep holds no words, so the page says it heard none."""
+    context = browser.new_context(viewport={"width": 390, "height": 844}, permissions=["microphone"])
+    page = context.new_page()
+    console = Console(page)
+    page.goto(f"{robot.url}/talk")
+    ptt = page.locator("#ptt").bounding_box()
+    assert ptt is not None
+    page.mouse.move(ptt["x"] + ptt["width"] / 2, ptt["y"] + ptt["height"] / 2)
+    page.mouse.down()
+    page.wait_for_selector("#ptt.recording", timeout=WAIT_S * 1000)
+    page.wait_for_timeout(1500)
+    page.mouse.up()
+    page.wait_for_function(
+        "document.getElementById('status').textContent.includes('did not hear')"
+        " || document.querySelector('.bubble.you') !== null",
+        timeout=30_000,
+    )
+    status = page.text_content("#status") or ""
+    assert "did not hear" in status or page.locator(".bubble.you").count() == 1, status
+    context.close()
+    assert console.errors == []
+
+
 def test_operator_pages_refuse_a_visitor(browser: Any, robot: Any) -> None:
     context = browser.new_context()
     page = context.new_page()

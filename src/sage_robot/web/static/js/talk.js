@@ -3,10 +3,6 @@ import { $, api, el } from "./common.js";
 
 const MIN_RECORDING_MS = 300; // shorter presses are taps, not speech
 
-function say(who, text) {
-  $("conversation").prepend(el("div", { class: `bubble ${who}` }, text));
-}
-
 async function speak(text) {
   try {
     const resp = await fetch("/api/talk/say", {
@@ -38,8 +34,9 @@ async function answer(result) {
     $("status").textContent = data.error;
     return;
   }
-  say("you", data.transcript);
-  say("sage", data.reply);
+  const turn = el("div", { class: "turn" }, el("div", { class: "bubble you" }, data.transcript),
+    el("div", { class: "bubble sage" }, data.reply));
+  $("conversation").prepend(turn); // newest exchange on top, question above its reply
   $("status").textContent = "";
   document.body.dataset.replies = String(Number(document.body.dataset.replies || 0) + 1);
   if (data.reply) speak(data.reply);
