@@ -25,7 +25,7 @@ from sage_robot.core.clock import SimClock
 from sage_robot.core.config import Settings
 from sage_robot.core.geometry import compose, wrap_angle
 from sage_robot.core.mapio import write_map
-from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D, Twist
+from sage_robot.core.msgs import Imu, LaserScan, OccupancyGrid, Odometry, Pose2D, Twist
 from sage_robot.core.node import NodeContext
 
 from .nav_raycast import RANGE_MAX_M, RANGE_MIN_M, beam_angles, cast
@@ -39,11 +39,14 @@ PERSON_RADIUS_M = 0.25
 
 class KinematicSim:
     def __init__(self, bus: Bus, grid: OccupancyGrid, start: tuple[float, float, float], settings: Settings,
-                 odom_scale: float = 1.0, seed: int = 0) -> None:
+                 odom_scale: float = 1.0, seed: int = 0, odom_w_scale: float = 1.0,
+                 imu: bool = False) -> None:
         self.bus, self.grid, self.settings = bus, grid, settings
         self.pose = start
         self.odom = (0.0, 0.0, 0.0)  # odometry starts at zero, as the MCU's does
         self.odom_scale = odom_scale
+        self.odom_w_scale = odom_w_scale  # wheel yaw rate error (slip, tilted dead wheels)
+        self.imu = imu
         self.rng = np.random.default_rng(seed)
         self.clearance = ndimage.distance_transform_edt(grid.data < 50) * grid.resolution
         self.people: list[list[float]] = []  # [x, y] each, radius PERSON_RADIUS_M
@@ -91,10 +94,12 @@ class KinematicSim:
             self._contact = False
         self.pose = (nx, ny, wrap_angle(th + w * dt))
         ox, oy, oth = self.odom
-        d = v * dt * self.odom_scale
-        self.odom = (ox + d * math.cos(oth + 0.5 * w * dt), oy + d * math.sin(oth + 0.5 * w * dt),
-                     wrap_angle(oth + w * dt))
-        self.bus.publish(topics.ODOM, Odometry(self.t, Pose2D(*self.odom), Twist(v * self.odom_scale, w)))
+        d, wo = v * dt * self.odom_scale, w * self.odom_w_scale
+        self.odom = (ox + d * math.cos(oth + 0.5 * wo * dt), oy + d * math.sin(oth + 0.5 * wo * dt),
+                     wrap_angle(oth + wo * dt))
+        self.bus.publish(topics.ODOM, Odometry(self.t, Pose2D(*self.odom), Twist(v * self.odom_scale, wo)))
+        if self.imu:
+            self.bus.publish(topics.IMU, Imu(self.t, (0.0, 0.0, w), (0.0, 0.0, 9.81)))
         if self.k % SCAN_EVERY == 0:
             self.truth.append((self.t, *self.pose))
             self.bus.publish(topics.SCAN, self.scan())

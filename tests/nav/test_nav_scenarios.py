@@ -10,7 +10,7 @@ import numpy as np
 from sage_robot.core import topics
 from sage_robot.core.config import Settings
 from sage_robot.core.mapio import read_map
-from sage_robot.core.msgs import Event, OccupancyGrid
+from sage_robot.core.msgs import Event, OccupancyGrid, Pose2D, PoseWithCovariance, Text
 from sage_robot.core.msgs.nav import LocalizationHealth, NavigateGoal
 from sage_robot.core.paths import map_yaml
 from sage_robot.nav.mapdata import load_for
@@ -21,6 +21,7 @@ from .test_localization_control import FLOOR
 from .test_navigator import GOAL_TOLERANCE_TRUTH_M, REAL_TIMEOUT_S, WIDE
 
 A, B = (1.5, 2.0, 0.0), (9.5, 2.0, 0.0)
+COVARIANCE = (0.04, 0.0, 0.0, 0.0, 0.04, 0.0, 0.0, 0.0, 0.01)  # 0.2 m, 0.1 rad
 
 
 def _events(bus):
@@ -104,3 +105,30 @@ async def test_speed_zone_is_obeyed(tmp_path) -> None:
         assert in_zone and max(in_zone) <= limit + 1e-6
         assert max(outside) > 2 * limit  # it does speed up again
         assert not sim.reversed_commands()
+
+
+async def test_ekf_with_gyro_drives_despite_slipping_wheels(tmp_path) -> None:
+    grid = draw(WIDE, 0.05, scale=10)
+    path = write_building(tmp_path, grid, {"ROOM_A": A, "ROOM_B": B})
+    settings = settings_for(path, "ROOM_A", use_ekf=True)
+    async with running(settings, grid, A, odom_w_scale=1.15, imu=True) as (bus, _clock, sim):
+        handle = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place="ROOM_B"))
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        assert result.ok, result.message
+        assert math.hypot(sim.pose[0] - B[0], sim.pose[1] - B[1]) <= GOAL_TOLERANCE_TRUTH_M
+        assert sim.collisions == 0 and not sim.reversed_commands()
+
+
+async def test_initial_pose_can_be_set_at_run_time(tmp_path) -> None:
+    grid = draw(FLOOR, 0.05, scale=10)
+    here, elsewhere = (3.0, 5.5, 0.0), (12.0, 2.0, math.pi / 2)
+    path = write_building(tmp_path, grid, {"HERE": here, "ELSEWHERE": elsewhere})
+    async with running(settings_for(path, "ELSEWHERE"), grid, here) as (bus, clock, _sim):
+        health: list[LocalizationHealth] = []
+        bus.subscribe(topics.LOC_HEALTH, LocalizationHealth, health.append, maxsize=1000)
+        await wait_until(clock, lambda: len(health) > 10, 10, "health reports")
+        assert health[-1].lost  # it starts at the wrong place and knows it
+        bus.publish(topics.INITIAL_POSE, PoseWithCovariance(clock.now(), "map", Pose2D(*here), COVARIANCE))
+        await wait_until(clock, lambda: not health[-1].lost and health[-1].score > 0.8, 10, "a good fit")
+        where = await bus.call(topics.WHERE_AM_I, Text(""))
+        assert where.nearest_place == "HERE" and where.localized and where.distance_m < 0.3
