@@ -210,3 +210,10 @@ def test_groups_stand_clear_of_the_way_into_a_room(seed: int) -> None:
             f = np.clip(np.dot([p.x, p.y] - pa, pb - pa) / np.dot(pb - pa, pb - pa), 0.0, 1.0)
             gap = float(np.hypot(*([p.x, p.y] - (pa + f * (pb - pa)))))
             assert gap > 0.25 + 0.25 + 0.1, (p.x, p.y)  # the robot passes along the spur
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_standers_stand_by_a_wall(seed: int) -> None:
+    w = build_world(load_profile(None, {"sim": {"seed": seed, "pedestrians": 6}}))
+    for p in (p for p in w.crowd.people if p.behaviour == "stander"):
+        assert w.raycaster.clearance_at(p.x, p.y) < 0.25 + 0.2, (p.x, p.y)

@@ -37,7 +37,8 @@ APPROACH_STAY_S = (30.0, 60.0)
 WALL_MARGIN_M = 0.05  # people keep their body this far clear of walls
 ARRIVE_M = 0.15
 SPAWN_MIN_DIST_M = 5.0  # random people start at least this far from the robot
-DEFAULT_MIX = ("walker", "stander", "approacher", "group", "group", "group")
+EDGE_TRIES = 50
+CORRIDOR_HALF_MIN_M = 0.8  # lane edges at least this half-wide are corridors (spurs are narrower)
 
 
 @dataclass
@@ -104,15 +105,22 @@ class Lanes:
     def nearest(self, x: float, y: float) -> int:
         return int(np.argmin(np.hypot(self.nodes[:, 0] - x, self.nodes[:, 1] - y)))
 
-    def random_point(self, rng: np.random.Generator, margin_m: float) -> tuple[float, float, int]:
-        """A random point on a random edge, offset sideways up to its half-width - margin."""
-        a = int(rng.integers(len(self.nodes)))
-        if not self.adj[a]:
-            return (float(self.nodes[a, 0]), float(self.nodes[a, 1]), a)
-        b, half = self.adj[a][int(rng.integers(len(self.adj[a])))]
+    def random_point(
+        self, rng: np.random.Generator, margin_m: float, edge: bool = False
+    ) -> tuple[float, float, int]:
+        """A random point on a random edge, offset sideways up to its half-width - margin
+        (``edge``: exactly that far, to one side: someone standing by the wall)."""
+        for _ in range(EDGE_TRIES):
+            a = int(rng.integers(len(self.nodes)))
+            if not self.adj[a]:
+                return (float(self.nodes[a, 0]), float(self.nodes[a, 1]), a)
+            b, half = self.adj[a][int(rng.integers(len(self.adj[a])))]
+            if not edge or half >= CORRIDOR_HALF_MIN_M:  # by a wall means a corridor's wall
+                break
         f = float(rng.uniform(0.1, 0.9))
         p = self.nodes[a] + f * (self.nodes[b] - self.nodes[a])
-        off = _lateral(self.nodes[a], self.nodes[b]) * rng.uniform(-1, 1) * max(half - margin_m, 0.0)
+        side = float(rng.choice([-1.0, 1.0])) if edge else float(rng.uniform(-1, 1))
+        off = _lateral(self.nodes[a], self.nodes[b]) * side * max(half - margin_m, 0.0)
         return (float(p[0] + off[0]), float(p[1] + off[1]), a)
 
 

@@ -58,10 +58,10 @@ def spawn_crowd(
         d = math.hypot(x - robot_xy[0], y - robot_xy[1])
         return lo <= d <= hi
 
-    def spot(ok: Callable[[float, float], bool]) -> tuple[float, float]:
+    def spot(ok: Callable[[float, float], bool], edge: bool = False) -> tuple[float, float]:
         for _ in range(SPAWN_TRIES):
             if lanes is not None:
-                x, y, _ = lanes.random_point(rng, PERSON_RADIUS_M + 0.1)
+                x, y, _ = lanes.random_point(rng, PERSON_RADIUS_M + 0.1, edge)
             else:
                 x, y = sample_free(rng)
             if clear(x, y, PERSON_RADIUS_M + 0.1) and ok(x, y):
@@ -99,7 +99,7 @@ def spawn_crowd(
                 )
             )
             continue
-        x, y = spot(far)
+        x, y = spot(far, edge=kind == "stander")  # standers stand by a wall, out of the way
         behaviour = "stander" if kind == "stander" else "walker"
         people.append(
             PersonState(pid, x, y, heading, behaviour, speed_mps=float(rng.uniform(*WALK_SPEED_MPS)))
