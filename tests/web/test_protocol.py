@@ -260,3 +260,18 @@ def test_oversized_upload_is_refused_before_it_is_read(client: httpx.Client) -> 
     big = b"\0" * (6 * 1024 * 1024)
     resp = client.post("/api/talk/audio", files={"audio": ("long.webm", big, "audio/webm")})
     assert resp.status_code == 413 and "over" in resp.json()["error"]
+
+
+def test_camera_as_mjpeg_for_an_img_tag(robot: Any, cookie: str) -> None:
+    """The simulated camera's frames, as the seed's web_video_server served them."""
+    assert httpx.get(f"{robot.url}/stream?topic=/image_raw").status_code == 401
+    with httpx.stream("GET", f"{robot.url}/stream?topic=/image_raw", headers={"Cookie": cookie},
+                      timeout=WAIT_S) as resp:  # fmt: skip
+        assert resp.headers["content-type"].startswith("multipart/x-mixed-replace")
+        data = b""
+        for chunk in resp.iter_bytes():
+            data += chunk
+            if data.count(b"--sageframe") >= 2:
+                break
+    first = data.split(b"\r\n\r\n", 1)[1]
+    assert first[:2] == b"\xff\xd8", "each part is a JPEG"

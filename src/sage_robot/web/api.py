@@ -12,7 +12,7 @@ import math
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
-from fastapi.responses import Response
+from fastapi.responses import Response, StreamingResponse
 
 from sage_robot.core import topics
 from sage_robot.core.errors import ConfigError, SageError
@@ -25,6 +25,7 @@ router = APIRouter()
 INITIAL_POSE_COV = (0.25, 0.0, 0.0, 0.0, 0.25, 0.0, 0.0, 0.0, 0.07)  # x,y m², theta rad² (RViz's)
 PLACES_TIMEOUT_S = 2.0
 MAX_COORD_M = 10_000.0  # a pose farther than this from the origin is a typo
+MJPEG_BOUNDARY = "sageframe"
 
 _log = get_logger("web")
 
@@ -174,3 +175,24 @@ async def initial_pose(request: Request) -> dict[str, Any]:
     )
     _log.info("initial pose from the operator", x=pose.x, y=pose.y, theta=pose.theta)
     return {"ok": True}
+
+
+@router.get("/api/video.mjpeg", dependencies=[Depends(require_operator)])
+@router.get("/stream", dependencies=[Depends(require_operator)], include_in_schema=False)
+async def mjpeg(request: Request) -> StreamingResponse:
+    """The camera as MJPEG (multipart/x-mixed-replace), for an ``<img>`` or the seed's
+    web_video_server URL ``/stream?topic=/image_raw``; latest frame, web.camera_fps at most."""
+    hub = state_of(request).hub
+
+    async def frames() -> Any:
+        listener = hub.listen(("camera",))
+        try:
+            while not await request.is_disconnected():
+                _, due = await hub.next_batch(listener)
+                if due and hub.frame:
+                    head = f"--{MJPEG_BOUNDARY}\r\nContent-Type: image/jpeg\r\n"
+                    yield (head + f"Content-Length: {len(hub.frame)}\r\n\r\n").encode() + hub.frame + b"\r\n"
+        finally:
+            hub.unlisten(listener)
+
+    return StreamingResponse(frames(), media_type=f"multipart/x-mixed-replace; boundary={MJPEG_BOUNDARY}")
