@@ -87,6 +87,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "log_duration_s": round(result.log.duration_s, 1),
         "processing_s": round(result.seconds, 2),
         "realtime_factor": round(result.realtime_factor, 2),
+        "cpu_s": round(result.cpu_seconds, 2),
+        "realtime_factor_cpu": round(result.realtime_factor_cpu, 2),
         **err.as_dict(),
         "cpu": platform.processor() or platform.machine(),
     }

@@ -32,6 +32,8 @@ from sage_robot.nav.slam.points import Pose, Scan, normals, rotate, transform, v
 from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, PoseGraph
 
 MIN_SCAN_POINTS = 20  # a scan with fewer hits is dead-reckoned
+DOUBTFUL_INLIERS = 0.6  # a match this poor makes the tracker try other motion guesses
+GLITCH_MARGIN = 0.05  # another guess must match this much better (inlier fraction) to win
 
 
 @dataclass(frozen=True)
@@ -113,6 +115,7 @@ class Slam:
         self.optimizations = 0
         self.map_version = 0  # bumps when keyframe poses change (after an optimisation)
         self._last_odom: Pose | None = None
+        self._last_step: Pose = (0.0, 0.0, 0.0)  # estimated motion between the last two scans
         self._local: PointMap | None = None
         self._since_loop_try = 0
 
@@ -127,13 +130,22 @@ class Slam:
             self._add_keyframe(stamp, odom, scan, self.initial_pose, None)
             self.trajectory.append(_TrajectoryEntry(stamp, 0, (0.0, 0.0, 0.0)))
             return StepResult(self.pose, 1.0, 1.0, True, False)
-        predicted = compose(self.pose, relative(self._last_odom, odom))
+        step = relative(self._last_odom, odom)
+        predicted = compose(self.pose, step)
         self._last_odom = odom
         match = self._track(q, predicted)
+        if self._doubtful(step, match):
+            # Odometry glitches (frozen, then a jump) happen: also try "as the last step" and
+            # "no motion", and keep the prediction whose match fits best.
+            for guess in (compose(self.pose, self._last_step), self.pose):
+                other = self._track(q, guess)
+                if other is not None and (match is None or other.inliers > match.inliers + GLITCH_MARGIN):
+                    match, predicted = other, guess
         if match is None or match.inliers < cfg.min_track_inliers:
             pose, score, inliers = predicted, 0.0, match.inliers if match else 0.0
         else:
             pose, score, inliers = match.pose, match.score, match.inliers
+        self._last_step = relative(self.pose, pose)
         self.pose, self.last_score = pose, score
         kf = len(self.keyframes) - 1
         last = self.graph.poses[kf]
@@ -146,6 +158,14 @@ class Slam:
         self.trajectory.append(_TrajectoryEntry(stamp, len(self.keyframes) - 1, (0.0, 0.0, 0.0)))
         closed = self._try_loop_closure()
         return StepResult(self.pose, score, inliers, True, closed)
+
+    def _doubtful(self, step: Pose, match: Match | None) -> bool:
+        """Is the odometry step or its match suspicious?"""
+        cfg = self.config
+        if self._local is None:
+            return False
+        big = math.hypot(step[0], step[1]) > cfg.search_xy_m or abs(step[2]) > 0.5 * cfg.search_theta_rad
+        return big or match is None or match.inliers < DOUBTFUL_INLIERS
 
     def _track(self, q: np.ndarray, predicted: Pose) -> Match | None:
         cfg = self.config
