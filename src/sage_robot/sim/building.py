@@ -315,6 +315,15 @@ def _place(name: str, pose: Pose2D) -> Place:
 # ---------------------------------------------------------------- walking lanes
 
 
+def _corridor_of(room: Room) -> int:
+    """Which corridor a room's door opens on: 0 east-west, 1 north-south, 2 the east wing."""
+    _, dy = room.door_centre()
+    if room.side in (E, W):
+        return 1
+    on_ew = abs(dy - (EW_Y[0] - WALL_M / 2)) < WALL_M or abs(dy - (EW_Y[1] + WALL_M / 2)) < WALL_M
+    return 0 if on_ew else 2
+
+
 def build_lanes() -> dict[str, Any]:
     """A graph of where people walk: corridor centre lines (split at junctions and doors)
     and a spur from each door into its room. Edges carry the lateral half-width (m)
@@ -340,11 +349,7 @@ def build_lanes() -> dict[str, Any]:
     spur_rooms = [r for r in ROOMS if r.place]
     for room in spur_rooms:
         dx, dy = room.door_centre()
-        line = (
-            0
-            if abs(dy - EW_Y[0] + WALL_M / 2) < 0.5 or abs(dy - EW_Y[1] - WALL_M / 2) < 0.5
-            else (2 if room.side in (N, S) else 1)
-        )
+        line = _corridor_of(room)
         stops[line].append(dx if lines[line][1] == "x" else dy)
     for (fixed, axis, _, _, half), pts in zip(lines, stops, strict=True):
         ids = [node(v, fixed) if axis == "x" else node(fixed, v) for v in sorted(set(pts))]
@@ -352,7 +357,7 @@ def build_lanes() -> dict[str, Any]:
     for room in spur_rooms:
         dx, dy = room.door_centre()
         ux, uy = room.inward()
-        line_pt = (dx, ew_y) if room in ROOMS[:17] else ((ns_x, dy) if room.side in (E, W) else (dx, wing_y))
+        line_pt = [(dx, ew_y), (ns_x, dy), (dx, wing_y)][_corridor_of(room)]
         inside = node(dx + ux * PLACE_DEPTH_M, dy + uy * PLACE_DEPTH_M)
         edges.append((node(*line_pt), inside, 0.4))
     return {"nodes": [list(p) for p in nodes], "edges": [[a, b, round(h, 3)] for a, b, h in edges]}
