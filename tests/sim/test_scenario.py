@@ -114,15 +114,19 @@ def run_cli(*args: str, timeout: float = 150.0) -> subprocess.CompletedProcess[s
 
 
 def test_sage_sim_headless_runs_a_scenario_and_prints_a_summary(tmp_path: Path) -> None:
-    path = write(tmp_path, BENCH_RUN + "duration_s: 3\n")
+    """The whole chain: scenario /cmd_vel -> serial bridge -> pty -> firmware model -> world body,
+    into the bench the lidar cannot see."""
+    path = write(tmp_path, BENCH_RUN + "duration_s: 8\n")
     proc = run_cli("--log-level", "WARNING", "sim", "--headless", "--fast", "--json", "--scenario", str(path),
                    "--nodes", "sim_world,mcu_sim,serial_bridge")  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = json.loads(proc.stdout.strip().splitlines()[-1])
     assert summary["scenario"] == "bench_in_the_way"
-    assert summary["sim_time_s"] == pytest.approx(3.0, abs=0.02)
-    assert summary["collisions"] == 0 and summary["distance_m"] > 0.3  # the MCU model drove it
-    assert summary["nodes_failed"] == []
+    assert summary["sim_time_s"] == pytest.approx(8.0, abs=0.02)
+    assert summary["collisions_by_kind"] == {"low_obstacle": 1}
+    assert summary["pose"][0] == pytest.approx(50.0 - 0.225 - 0.25, abs=0.03)  # stopped at the bench
+    assert summary["distance_m"] > 2.0
+    assert summary["nodes_failed"] == [] and summary["real_time_factor"] > 0
 
 
 def test_sage_sim_reports_a_bad_scenario_in_one_line(tmp_path: Path) -> None:
