@@ -275,3 +275,19 @@ def test_camera_as_mjpeg_for_an_img_tag(robot: Any, cookie: str) -> None:
                 break
     first = data.split(b"\r\n\r\n", 1)[1]
     assert first[:2] == b"\xff\xd8", "each part is a JPEG"
+
+
+def test_estop_cancels_a_goal_the_brain_starts_meanwhile(robot: Any) -> None:
+    """The e-stop stops every motion: a navigate_to goal sent on the bus (as the brain would)
+    while it is engaged is cancelled at once."""
+    from sage_robot.core.msgs.nav import NavigateGoal
+
+    teleop = robot.web_node().teleop
+    robot.run(teleop.set_estop(True, "test"))
+    try:
+        handle = robot.run(robot.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place="CLEAN_ROOM")))
+        result = robot.run(handle.result(), timeout=WAIT_S)
+        assert result.status.value == "canceled", result
+        assert teleop.counts["estop_cancels"] >= 1
+    finally:
+        robot.run(teleop.set_estop(False, "test"))

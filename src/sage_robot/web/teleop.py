@@ -10,7 +10,8 @@
   network that went quiet, which happens in real seconds even when the simulator runs
   faster than real time.
 - **E-stop** latches: while engaged every control message is refused with an error
-  reply, a zero Twist is published and navigation is cancelled. Only an explicit
+  reply, a zero Twist is published and navigation is cancelled — also a goal someone
+  else (the brain, a tour) starts meanwhile, within :data:`DEADMAN_CHECK_S`. Only an explicit
   ``{"type": "estop", "engaged": false}`` from a logged-in operator releases it.
 """
 
@@ -28,7 +29,8 @@ from sage_robot.core.msgs import Event, Twist
 from sage_robot.core.node import Node
 
 CLIENT_REPEAT_S = 0.1  # the page re-sends a held command this often (s); documented for pages
-DEADMAN_CHECK_S = 0.05  # how often the deadman looks at the last command time (s)
+DEADMAN_CHECK_S = 0.05  # how often the deadman (and the e-stop hold) looks (s)
+NAV_ACTIONS = (topics.NAVIGATE_TO, topics.TOUR)  # what the e-stop cancels
 
 _log = get_logger("web")
 
@@ -62,7 +64,9 @@ class Teleop:
         self.command = (0.0, 0.0)
         self.last_control = 0.0  # time.monotonic() of the last control message
         self.driver: object | None = None
-        self.counts = {"controls": 0, "deadman_stops": 0, "close_stops": 0, "refused": 0}
+        self.counts = {
+            "controls": 0, "deadman_stops": 0, "close_stops": 0, "refused": 0, "estop_cancels": 0,
+        }  # fmt: skip
 
     def start(self) -> None:
         self.node.spawn(self._deadman_loop(), "web.deadman")
@@ -107,11 +111,22 @@ class Teleop:
             self._publish(0.0, 0.0)
             await self.cancel_navigation()
 
+    async def _hold_estop(self) -> None:
+        """While the e-stop is engaged, a goal that anyone starts (the brain, a tour) is cancelled
+        at once: the e-stop stops every motion, not only the operator's."""
+        for action in NAV_ACTIONS:
+            if self.bus.actions.active(action) is not None:
+                self.counts["estop_cancels"] += 1
+                _log.warning("navigation goal during e-stop: cancelled", action=action)
+                await self.cancel_navigation()
+                self._publish(0.0, 0.0)
+
     async def cancel_navigation(self) -> None:
-        active = self.bus.actions.active(topics.NAVIGATE_TO)
-        if active is not None:
-            with contextlib.suppress(Exception):
-                await active.cancel()
+        for action in NAV_ACTIONS:
+            active = self.bus.actions.active(action)
+            if active is not None:
+                with contextlib.suppress(Exception):
+                    await active.cancel()
         if self.bus.has_service(topics.CANCEL_NAV):
             with contextlib.suppress(Exception):
                 await self.bus.call(topics.CANCEL_NAV, None, timeout=1.0)
@@ -123,6 +138,8 @@ class Teleop:
     async def _deadman_loop(self) -> None:
         while True:
             await asyncio.sleep(DEADMAN_CHECK_S)
+            if self.estop:
+                await self._hold_estop()
             silent = time.monotonic() - self.last_control
             if self.command != (0.0, 0.0) and self.driver is not None and silent > self.deadman_s:
                 self.counts["deadman_stops"] += 1
