@@ -3,8 +3,8 @@
 Cells are ``resolution`` (m) squares; ``logodds[row, col]`` with row = y, column = x and the
 grid's lower-left corner at ``origin`` (m, map frame), as :class:`OccupancyGrid`. Every beam
 adds ``L_FREE`` to the cells it crosses and ``L_OCC`` to the cell it ends in; a beam with no
-return clears up to ``max_range`` without marking an end. The grid grows in ``GROW_M``
-steps as scans reach beyond it.
+return clears up to the scan's range_max (at most ``max_range``) without marking an end. The
+grid grows in ``GROW_M`` steps as scans reach beyond it.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ class OccupancyMapper:
             returned = valid & (r < min(scan.range_max, self.max_range))
             no_return = ~np.isfinite(r) | (r >= scan.range_max)
             use = returned | no_return
-            length = np.where(returned, r, self.max_range)[use]
+            length = np.where(returned, r, min(scan.range_max, self.max_range))[use]
             a = scan.angles[use] + lt + pose[2]
             starts.append(np.repeat([[ox, oy]], len(a), axis=0))
             ends.append(np.column_stack((ox + length * np.cos(a), oy + length * np.sin(a))))
