@@ -35,7 +35,7 @@ WIDE = """
 ######################
 """
 A, B = (1.5, 2.0, 0.0), (9.5, 2.0, 0.0)
-REAL_TIMEOUT_S = 90.0
+REAL_TIMEOUT_S = 240.0  # wall-clock bound per goal (the shared machine can be very loaded)
 GOAL_TOLERANCE_TRUTH_M = 0.4  # xy goal tolerance (0.25 m, on the estimate) + localization error
 
 
@@ -173,4 +173,15 @@ async def test_tour_visits_in_order_and_resumes(tmp_path) -> None:
         assert result.value.completed == ("ROOM_B", "ROOM_A"), result
         arrived = [e.data["place"] for e in events if e.kind == "arrived"]
         assert arrived == ["ROOM_A", "ROOM_B", "ROOM_A"]
+        assert sim.collisions == 0 and not sim.reversed_commands()
+
+
+async def test_settles_near_a_goal_someone_stands_on(tmp_path) -> None:
+    grid, settings = _building(tmp_path, WIDE, people_wait_s=2.0)
+    async with running(settings, grid, A) as (bus, _clock, sim):
+        sim.people.append([B[0], B[1]])  # a visitor stands right on the spot
+        result = await asyncio.wait_for((await _go(bus, "ROOM_B")).result(), REAL_TIMEOUT_S)
+        assert result.ok, result.message
+        assert "short" in result.value.reason
+        assert math.hypot(sim.pose[0] - B[0], sim.pose[1] - B[1]) <= 2.0 + 0.2
         assert sim.collisions == 0 and not sim.reversed_commands()

@@ -8,7 +8,8 @@ collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
    stop, and watch the intended path for up to ``nav.people_wait_s``; go on once it is free;
 3. replan around whatever is still there;
 4. spin in place (a full turn refreshes the costmaps), replan;
-5. abort with a reason a person understands.
+5. within ``SETTLE_NEAR_GOAL_M`` of the goal, settle there (succeeded, with a note: people
+   stand at the spot); else abort with a reason a person understands.
 
 When localization is lost: stop, Event ``lost``, global relocalization while spinning
 slowly; if health does not come back within ``nav.relocalize_timeout_s``, Event
@@ -50,6 +51,7 @@ RELOCALIZED_CONFIRM_S = 2.0  # and fit well this long to count as relocalized (s
 RELOCALIZED_SCORE = 0.75  # health score needed to count as relocalized (0..1)
 RELOCALIZED_SPREAD_M = 0.5  # and the particle cloud must have shrunk to this (m)
 ETA_MIN_SPEED_MPS = 0.3
+SETTLE_NEAR_GOAL_M = 2.0  # with the goal itself taken by people, this close counts as arrived
 KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
 
 
@@ -134,7 +136,10 @@ class GoalRun:
                                       round(self.clock.now() - t0, 2))
             except Blocked as exc:
                 self.node.stop()
-                await self._recover(str(exc))
+                near = await self._recover(str(exc))
+                if near:
+                    return NavigateResult(True, self.target.name, near, round(self.travelled, 2),
+                                          round(self.clock.now() - t0, 2))
 
     async def _wait_localized(self) -> None:
         deadline = self.clock.now() + LOCALIZED_WAIT_S
@@ -196,9 +201,11 @@ class GoalRun:
         return math.hypot(pose[0] - gx, pose[1] - gy) < self.params.lookahead_m
 
     # ------------------------------------------------------------ recoveries
-    async def _recover(self, why: str) -> None:
+    async def _recover(self, why: str) -> str:
+        """One rung of the ladder. Returns a note when the robot should settle for where it is
+        (the goal itself is taken and it stands close by); raises ActionAborted at the top."""
         if why == "relocalized":
-            return
+            return ""
         pose = self.pose()
         self._level_xy = (pose[0], pose[1])
         level, self._level = self._level, self._level + 1
@@ -213,10 +220,16 @@ class GoalRun:
         elif level == 3:
             await self._spin(2 * math.pi, SPIN_SPEED_RADPS)
         else:
+            gx, gy, _ = self.target.pose
+            short = math.hypot(pose[0] - gx, pose[1] - gy)
+            if short <= SETTLE_NEAR_GOAL_M:
+                self.node.event("arrived", f"arrived near {self.target.spoken}", place=self.target.name)
+                return f"stopped {short:.1f} m short: someone is standing at the spot"
             where = f"to {self.target.spoken}" if self.target.name else "to the goal"
             waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
-                if self._waited_s else "I "
+                if self._waited_s >= 1.0 else "I "
             raise ActionAborted(f"the way {where} is blocked: {waited}found no way around")
+        return ""
 
     async def _wait_for_people(self) -> None:
         """Stop, say so, and watch the intended (obstacle-free) path until it clears."""
