@@ -8,12 +8,19 @@ skips with a clear message when the data is absent. Nothing from there is copied
 from __future__ import annotations
 
 import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+
+# Tests never touch the user's real state (knowledge base, operator password, maps): every
+# test and every `sage` subprocess they start writes under one temporary folder.
+_SANDBOX = Path(tempfile.mkdtemp(prefix="sage-tests-"))
+os.environ["SAGE_STATE_DIR"] = str(_SANDBOX / "state")
+os.environ["SAGE_DATA_DIR"] = str(_SANDBOX / "data")
 SHARED_DATA = Path(os.environ.get("SAGE_SHARED_DATA", REPO.parent / "shared" / "data"))
 
 
