@@ -227,3 +227,19 @@ async def test_a_failing_physics_step_restarts_the_node_and_keeps_the_world() ->
     health = launcher.health["sim_world"]
     assert health.restarts == 1 and "boom" in health.last_error
     assert calls["n"] > 100  # the same world kept stepping after the restart
+
+
+async def test_goal_and_heard_events_without_navigation() -> None:
+    from sage_robot.core.msgs import Text
+    from sage_robot.sim.node import SUMMARY_RESOURCE
+
+    events = [{"at": 0.5, "goal": "the cafe"}, {"at": 0.7, "heard": "hello"}]
+    scenario = parse_scenario({"pedestrians": 0, "events": events}, "goals")
+    ctx = make_context(load_profile(None, {"sim": {"speed": None, "camera_hz": 0}}), simulated=True)
+    ctx.resources[SCENARIO_RESOURCE] = scenario
+    heard: list[Text] = []
+    ctx.bus.subscribe(topics.HEARD, Text, heard.append)
+    await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=1.0)
+    (goal,) = ctx.resources[SUMMARY_RESOURCE]["goals"]
+    assert goal["goal"] == "the cafe" and goal["status"] == "no navigation node"
+    assert [t.data for t in heard] == ["hello"]

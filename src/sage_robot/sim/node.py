@@ -22,7 +22,7 @@ import time
 from typing import Any
 
 from sage_robot.core import topics
-from sage_robot.core.errors import ConfigError
+from sage_robot.core.errors import ConfigError, SageError
 from sage_robot.core.msgs import Event, Odometry, Pose2D, Text, Twist
 from sage_robot.core.msgs.voice import Doa
 from sage_robot.core.node import Node
@@ -227,6 +227,10 @@ class WorldNode(Node):
             record["status"] = "no navigation node"
             self.log.warning("scenario goal skipped: nothing serves navigate_to", goal=place)
             return
-        handle = await self.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=place))
-        result = await handle.result()
+        try:
+            handle = await self.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=place))
+            result = await handle.result()
+        except SageError as exc:  # the server went away in between: a result, not a crash
+            record.update(status="error", message=str(exc))
+            return
         record.update(status=result.status.value, message=result.message, done_s=round(self.clock.now(), 2))
