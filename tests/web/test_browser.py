@@ -354,6 +354,9 @@ def test_admin_adds_a_place_by_clicking_the_map(operator: Any, robot: Any) -> No
     console = Console(page)
     page.goto(f"{robot.url}/admin")
     page.wait_for_selector("#map[data-map-version]", timeout=WAIT_S * 1000)
+    # the panels above the map fill in asynchronously: measure the map once they have
+    page.wait_for_selector("#places tr", timeout=WAIT_S * 1000)
+    page.wait_for_function("!document.getElementById('kb').textContent.includes('loading')")
     page.locator("#map").scroll_into_view_if_needed()
     box = page.locator("#map").bounding_box()
     assert box is not None

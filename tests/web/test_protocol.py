@@ -123,15 +123,16 @@ def test_deadman_stops_a_silent_operator(robot: Any, cookie: str, cmd_log: list[
     before = teleop.counts["deadman_stops"]
     deadman_s = robot.ctx.settings.web.deadman_s
     with teleop_ws(robot, cookie) as ws:
+        t_sent = time.monotonic()
         ws.send(json.dumps({"type": "control", "x": 0.3, "z": 0.0}))
-        deadline = time.monotonic() + WAIT_S
+        deadline = t_sent + WAIT_S
         while time.monotonic() < deadline and teleop.counts["deadman_stops"] == before:
-            time.sleep(0.02)
+            time.sleep(0.01)
+        silent = time.monotonic() - t_sent
         assert teleop.counts["deadman_stops"] == before + 1
-        sent = [t for t, m in cmd_log if m.linear_x == 0.3]
-        stop = [t for t, m in cmd_log if m.is_zero and sent and t > sent[-1]]
-        assert sent and stop, "a command and then a stop on /cmd_vel"
-        assert deadman_s <= stop[0] - sent[-1] < deadman_s + 0.3
+        assert deadman_s <= silent < deadman_s + 0.5, f"stopped after {silent:.2f} s of silence"
+        ours = [t for t, m in cmd_log if m.linear_x == 0.3]
+        assert ours and any(m.is_zero for t, m in cmd_log if t > ours[-1]), "a stop after the command"
         msg = recv_json(ws, "deadman")  # the page is told why the robot stopped
         assert "stopped" in msg["message"]
     assert teleop.command == (0.0, 0.0)
