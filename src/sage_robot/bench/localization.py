@@ -53,8 +53,7 @@ def _poses(route: np.ndarray) -> list[tuple[float, float, float]]:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from scipy import ndimage
-
+    from sage_robot.bench.planner import drivable_cells
     from sage_robot.core.config import Settings
     from sage_robot.core.geometry import compose, wrap_angle
     from sage_robot.nav.amcl import ParticleFilter
@@ -70,8 +69,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     rng = np.random.default_rng(args.seed)
     cm = data.costmap(settings.robot.radius_m, settings.nav.inflation_radius_m,
                       settings.nav.cost_scaling_factor)
-    labels, _ = ndimage.label(cm.cost == 0)
-    cells = np.argwhere(labels == int(np.argmax(np.bincount(labels.ravel())[1:])) + 1)
+    cells = drivable_cells(cm, list(data.places))
 
     def scan(pose: tuple[float, float, float]) -> np.ndarray:
         lx, ly, lt = compose(pose, mount)
@@ -83,6 +81,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     for n in (500, 2000):
         pf = ParticleFilter(data.grid, np.random.default_rng(args.seed), n, n, mount, args.beams)
         pf.set_pose(*poses[0])
+        pf.update(poses[0], angles, scan(poses[0]), 12.0)  # the odometry reference: no update yet
         times, errs = [], []
         odom = poses[0]
         for k in range(UPDATES):
@@ -106,6 +105,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         t = time.perf_counter()
         pf.global_localization((angles, scan(route[0]), 12.0))
         init_s = time.perf_counter() - t
+        pf.update(route[0], angles, scan(route[0]), 12.0)  # odometry reference
         converged_at = None
         for k, truth in enumerate(route[1:TRIAL_STEPS + 1], start=1):
             pf.update(truth, angles, scan(truth), 12.0, force=True)

@@ -29,9 +29,25 @@ def _ms(samples: list[float]) -> dict[str, float]:
             "max_ms": round(float(a.max()), 2)}
 
 
-def run(args: argparse.Namespace) -> dict[str, Any]:
+def drivable_cells(cm: Any, places: list[Any]) -> np.ndarray:
+    """Free cells (cost 0) of the region the places are in (most places), else the largest
+    free region: a map may be "free" outside its building too."""
     from scipy import ndimage
 
+    labels, _ = ndimage.label(cm.cost == 0)
+    votes = []
+    for p in places:
+        r, c = cm.geom.to_cell(p.pose.x, p.pose.y)
+        if bool(cm.geom.inside(r, c)) and labels[int(r), int(c)] > 0:
+            votes.append(int(labels[int(r), int(c)]))
+    if votes:
+        region = max(set(votes), key=votes.count)
+    else:
+        region = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1
+    return np.argwhere(labels == region)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.core.config import Settings
     from sage_robot.nav.mapdata import load_for
     from sage_robot.nav.planner import MAX_FINE_CELLS, NoPath, _astar_backend, plan
@@ -70,10 +86,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 times.append(time.perf_counter() - t)
             out["longest_route"] = {"from": a.name, "to": b.name, "length_m": round(best_len, 2),
                                     **_ms(times)}
-    free = cm.cost == 0
-    labels, _ = ndimage.label(free)
-    biggest = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1
-    cells = np.argwhere(labels == biggest)
+    cells = drivable_cells(cm, places)
     rng = np.random.default_rng(args.seed)
     times, lengths, failed = [], [], 0
     for _ in range(args.pairs):

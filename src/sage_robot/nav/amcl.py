@@ -9,7 +9,8 @@
 - KLD-adaptive particle count between ``min_particles`` and ``max_particles``
   (Fox 2003; AMCL's ``pf_err`` 0.01, ``pf_z`` 0.99) over 0.5 m × 0.5 m × 10° bins.
 - Augmented MCL: ``w_slow``/``w_fast`` averages of the measurement likelihood; when the
-  fit drops, that fraction of particles is redrawn uniformly over free space.
+  short-term fit drops below ``INJECT_RATIO`` of the long-term one, up to
+  ``MAX_INJECT_FRACTION`` of the particles are redrawn uniformly over free space.
 - Global localization: candidates over all free space scored against the scan, the best
   ``max_particles`` kept (a better start than AMCL's uniform draw on a large floor).
 
@@ -48,6 +49,8 @@ INIT_SIGMA_XY_M, INIT_SIGMA_YAW_RAD = 0.25, 0.2
 CLUSTER_CELL_M = 0.5  # particles are grouped on this grid to find the heaviest cluster
 CLUSTER_RADIUS_M = 1.0  # the estimate averages particles this close to that cluster
 MAX_INJECT_FRACTION = 0.2  # at most this share of particles is redrawn at random per update
+INJECT_RATIO = 0.8  # inject only once the short-term fit falls below this share of the long-term one
+SPREAD_SHARE = 0.9  # spread_m looks at this share of the particles nearest the estimate
 
 
 @dataclass(frozen=True)
@@ -259,7 +262,7 @@ class ParticleFilter:
         new = self.particles[idx]
         p_inject = 0.0
         if self.w_slow > 0:
-            p_inject = min(MAX_INJECT_FRACTION, max(0.0, 1.0 - self.w_fast / self.w_slow))
+            p_inject = min(MAX_INJECT_FRACTION, max(0.0, 1.0 - self.w_fast / (INJECT_RATIO * self.w_slow)))
         inject = self.rng.random(n) < p_inject
         if inject.any():
             new[inject] = self.field.random_free_poses(int(inject.sum()), self.rng)
@@ -282,10 +285,12 @@ class ParticleFilter:
         return _weighted_pose(p[near], w[near])
 
     def spread_m(self) -> float:
-        """Root of the xy variance of the whole cloud (m): small once the filter has converged."""
-        p, w = self.particles, self.weights
-        mx, my = float(np.dot(w, p[:, 0])), float(np.dot(w, p[:, 1]))
-        return math.sqrt(float(np.dot(w, (p[:, 0] - mx) ** 2 + (p[:, 1] - my) ** 2)))
+        """Root-mean-square distance (m) from the estimate of the nearest SPREAD_SHARE of the
+        particles: small once the filter has converged, whatever a few random ones do."""
+        e = self.estimate()
+        d = np.sort(np.hypot(self.particles[:, 0] - e.x, self.particles[:, 1] - e.y))
+        k = max(1, int(len(d) * SPREAD_SHARE))
+        return float(np.sqrt(np.mean(d[:k] ** 2)))
 
     def pose_at(self, odom: tuple[float, float, float]) -> tuple[float, float, float]:
         """The estimate carried forward by the odometry since the last filter update."""
