@@ -74,6 +74,29 @@ class LikelihoodField:
         self.free_cells = np.argwhere(grid.data == 0)
         if len(self.free_cells) == 0:
             raise ValueError("the map has no free cells to localize in")
+        # Flat, padded copy: one border cell at the cap distance takes every point off the map.
+        padded = np.pad(self.dist, 1, constant_values=LIKELIHOOD_MAX_DIST_M)
+        self._width = padded.shape[1]
+        self._rows, self._cols = padded.shape
+        self._flat_dist = padded.ravel()
+        self._log_tables: dict[float, np.ndarray] = {}
+
+    def log_p_table(self, range_max: float) -> np.ndarray:
+        """log(z_hit·N(d) + z_rand/range_max) per (padded, flat) cell, cached per range_max."""
+        table = self._log_tables.get(range_max)
+        if table is None:
+            d = self._flat_dist
+            p = Z_HIT * np.exp(-0.5 * (d / SIGMA_HIT_M) ** 2) + Z_RAND / range_max
+            table = np.log(p).astype(np.float32)
+            self._log_tables[range_max] = table
+        return table
+
+    def flat_index(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Index into the padded flat tables; points off the map land on the border."""
+        g = self.geom
+        col = np.clip(((x - g.origin_x) / g.resolution).astype(np.int64) + 1, 0, self._cols - 1)
+        row = np.clip(((y - g.origin_y) / g.resolution).astype(np.int64) + 1, 0, self._rows - 1)
+        return row * self._width + col
 
     def distances(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Distances at world points; outside the map counts as far from everything."""
@@ -105,9 +128,8 @@ def beam_log_likelihood(field: LikelihoodField, poses: np.ndarray, sensor: tuple
     a = poses[:, 2:3] + st + angles[None, :]
     ex = ox[:, None] + ranges[None, :] * np.cos(a)
     ey = oy[:, None] + ranges[None, :] * np.sin(a)
-    d = field.distances(ex, ey)
-    p = Z_HIT * np.exp(-0.5 * (d / SIGMA_HIT_M) ** 2) + Z_RAND / range_max
-    return np.log(p).sum(axis=1)
+    table = field.log_p_table(range_max)
+    return table[field.flat_index(ex, ey)].sum(axis=1, dtype=np.float64)
 
 
 def kld_count(bins: int, n_min: int, n_max: int) -> int:
@@ -254,7 +276,7 @@ class ParticleFilter:
         bins = np.floor(np.column_stack([
             self.particles[:, 0] / KLD_BIN_M, self.particles[:, 1] / KLD_BIN_M,
             self.particles[:, 2] / KLD_BIN_RAD])).astype(np.int64)
-        k = len(np.unique(bins, axis=0))
+        k = len(np.unique(_key(bins)))
         n = kld_count(k, self.n_min, self.n_max)
         # low-variance (systematic) resampling
         positions = (self.rng.random() + np.arange(n)) / n
@@ -276,9 +298,9 @@ class ParticleFilter:
         injected random particles and far-away hypotheses do not drag the pose)."""
         p, w = self.particles, self.weights
         cells = np.floor(p[:, :2] / CLUSTER_CELL_M).astype(np.int64)
-        _, inverse, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
+        _, inverse = np.unique(_key(cells), return_inverse=True)
+        mass = np.bincount(inverse.ravel(), weights=w)
         inverse = inverse.ravel()
-        mass = np.bincount(inverse, weights=w, minlength=len(counts))
         best = inverse == int(np.argmax(mass))
         centre = np.average(p[best, :2], axis=0, weights=w[best] + 1e-300)
         near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) <= CLUSTER_RADIUS_M
@@ -302,6 +324,14 @@ class ParticleFilter:
     @property
     def count(self) -> int:
         return len(self.particles)
+
+
+def _key(cells: np.ndarray) -> np.ndarray:
+    """One int64 per row of up to three small integer bin coordinates (each within ±2^19)."""
+    out = np.zeros(len(cells), dtype=np.int64)
+    for j in range(cells.shape[1]):
+        out = out * (1 << 20) + (cells[:, j] + (1 << 19))
+    return out
 
 
 def _weighted_pose(p: np.ndarray, w: np.ndarray) -> Estimate:
