@@ -113,3 +113,11 @@ def test_keepout_and_speed_masks_from_nav2(shared_data) -> None:
     assert limited.any()
     assert np.allclose(cm.speed[limited], speed.data[limited] / 100.0)
     assert (cm.speed[speed.data == 0] == 1.0).all()
+
+
+def test_far_scan_obstacles_are_forgotten() -> None:
+    cm = Costmap.from_grid(room(20.0, 4.0), 0.25, 0.55, 3.0)
+    cm.update_scan((2.0, 2.0, 0.0), np.array([0.0]), np.array([2.0]), 12.0)  # a mark at (4, 2)
+    cm.update_scan((15.0, 2.0, 0.0), np.array([0.0]), np.array([1.0]), 12.0, forget_beyond_m=5.0)
+    assert cm.cost_at(4.0, 2.0)[()] == 0  # 11 m away: forgotten
+    assert cm.cost_at(16.0, 2.0)[()] == LETHAL

@@ -167,7 +167,7 @@ class Costmap:
 
     # ------------------------------------------------------------------ obstacle layer
     def update_scan(self, sensor_pose: tuple[float, float, float], angles: np.ndarray,
-                    ranges: np.ndarray, range_max: float) -> None:
+                    ranges: np.ndarray, range_max: float, forget_beyond_m: float | None = None) -> None:
         """Clear cells along each beam (up to RAYTRACE_RANGE_M), then mark the hit cells of beams
         shorter than OBSTACLE_RANGE_M. ``sensor_pose`` is the lidar's (x, y, yaw) in this map's
         frame; ``angles`` (rad, sensor frame) and ``ranges`` (m; inf = no return)."""
@@ -193,7 +193,20 @@ class Costmap:
         ok = self.geom.inside(hr, hc)
         self.obstacles[hr[ok], hc[ok]] = True
         self.obstacles &= ~self.static  # walls belong to the static layer
+        if forget_beyond_m is not None:
+            self._forget_outside(sx, sy, forget_beyond_m)
         self.refresh()
+
+    def _forget_outside(self, x: float, y: float, radius_m: float) -> None:
+        """Drop scan marks outside the square of half-side ``radius_m`` around (x, y), so the
+        re-inflated region stays small on a large map (marks far away are stale anyway)."""
+        g = self.geom
+        lo, hi = g.to_cell(x - radius_m, y - radius_m), g.to_cell(x + radius_m, y + radius_m)
+        r0, c0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
+        r1, c1 = min(int(hi[0]) + 1, g.shape[0]), min(int(hi[1]) + 1, g.shape[1])
+        keep = self.obstacles[r0:r1, c0:c1].copy()
+        self.obstacles[:] = False
+        self.obstacles[r0:r1, c0:c1] = keep
 
     def clear_obstacles(self) -> None:
         """Nav2's clear-costmap recovery: forget everything the scans marked."""

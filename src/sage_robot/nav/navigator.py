@@ -38,6 +38,8 @@ from sage_robot.nav.mapdata import load_for
 
 Pose = tuple[float, float, float]
 
+GLOBAL_OBSTACLE_MEMORY_M = 12.0  # scan obstacles further than this from the robot are forgotten
+
 
 class NavigatorNode(Node):
     name = "navigator"
@@ -123,7 +125,8 @@ class NavigatorNode(Node):
         """Mark the latest scan into the global costmap (runs in the planning thread)."""
         pose, scan = self.pose(), self.scan
         if pose is not None and scan is not None:
-            self.global_cm.update_scan(self.sensor_pose(pose), scan.angles, scan.ranges, scan.range_max)
+            self.global_cm.update_scan(self.sensor_pose(pose), scan.angles, scan.ranges, scan.range_max,
+                                       forget_beyond_m=GLOBAL_OBSTACLE_MEMORY_M)
 
     def clear_costmaps(self) -> None:
         self.global_cm.clear_obstacles()
