@@ -132,7 +132,11 @@ def test_deadman_stops_a_silent_operator(robot: Any, cookie: str, cmd_log: list[
         assert teleop.counts["deadman_stops"] == before + 1
         assert deadman_s <= silent < deadman_s + 0.5, f"stopped after {silent:.2f} s of silence"
         ours = [t for t, m in cmd_log if m.linear_x == 0.3]
-        assert ours and any(m.is_zero for t, m in cmd_log if t > ours[-1]), "a stop after the command"
+        assert ours, "the command reached /cmd_vel"
+        deadline = time.monotonic() + WAIT_S  # the log's subscriber runs on the robot's loop
+        while time.monotonic() < deadline and not any(m.is_zero for t, m in cmd_log if t > ours[-1]):
+            time.sleep(0.01)
+        assert any(m.is_zero for t, m in cmd_log if t > ours[-1]), "a stop after the command"
         msg = recv_json(ws, "deadman")  # the page is told why the robot stopped
         assert "stopped" in msg["message"]
     assert teleop.command == (0.0, 0.0)
