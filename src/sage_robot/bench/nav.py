@@ -28,6 +28,7 @@ CLUTTER_SIZE_M = (0.6, 0.4)
 CLUTTER_CLEARANCE_M = 1.2  # clutter stays this far from walls and places
 LEG_TIMEOUT_S = 300.0  # simulated seconds per leg before it counts as failed
 SAMPLE_PERIOD_S = 0.2  # localization error sampling (simulated s)
+PEOPLE_WAIT_S = 60.0  # the simulator's visitors who walk up to the robot stay 30-60 s
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pairs", default="all", help="'all' ordered pairs of places, or N random legs")
     p.add_argument("--seed", type=int, default=7, help="world and goal seed")
     p.add_argument("--speed", type=float, default=4.0, help="simulated time per wall second")
+    p.add_argument("--people-wait", type=float, default=PEOPLE_WAIT_S,
+                   help="nav.people_wait_s: how long to wait for people in the way (s)")
 
 
 def _circuit(n: int, start: int) -> list[int]:
@@ -88,7 +91,7 @@ def _settings(args: argparse.Namespace) -> Any:
         raise ConfigError("the nav benchmark needs a waypoints file with two or more places")
     start = "DOCKING_STATION" if "DOCKING_STATION" in places else places.names()[0]
     return Settings.model_validate({
-        "nav": {**base, "initial_place": start},
+        "nav": {**base, "initial_place": start, "people_wait_s": args.people_wait},
         "sim": {"world_map": args.map, "speed": args.speed, "seed": args.seed,
                 "pedestrians": args.pedestrians, "clutter": False, "camera_hz": 0},
     }), list(places)

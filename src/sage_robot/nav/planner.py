@@ -24,6 +24,7 @@ COST_WEIGHT = 3.0  # extra step weight at cost 252 (so the path keeps off walls)
 MAX_FINE_CELLS = 400_000  # above this many cells, plan on a coarser grid
 PATH_SPACING_M = 0.05  # spacing of the returned path's points (m)
 SMOOTH_ITERATIONS = 2  # line-of-sight shortcut passes
+LINE_CHECK_STEP_CELLS = 0.25  # shortcut lines are checked every quarter cell
 GOAL_SEARCH_RADIUS_M = 0.3  # a goal inside an inflated cell moves to the nearest free one within this
 
 
@@ -96,7 +97,7 @@ def _search(weights: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) 
 
 
 def _line_free(costmap: Costmap, a: np.ndarray, b: np.ndarray, limit: int) -> bool:
-    n = max(2, int(np.hypot(*(b - a)) / (costmap.geom.resolution * 0.5)) + 1)
+    n = max(2, int(np.hypot(*(b - a)) / (costmap.geom.resolution * LINE_CHECK_STEP_CELLS)) + 1)
     t = np.linspace(0.0, 1.0, n)[:, None]
     pts = a + (b - a) * t
     return bool((costmap.cost_at(pts[:, 0], pts[:, 1]) < limit).all())
@@ -145,8 +146,9 @@ def path_length(points: np.ndarray) -> float:
 
 
 def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float],
-         max_cells: int = MAX_FINE_CELLS) -> Plan:
-    """A smoothed path from ``start`` to ``goal`` (map frame, m). Raises :class:`NoPath`."""
+         max_cells: int = MAX_FINE_CELLS, fine_fallback: bool = True) -> Plan:
+    """A smoothed path from ``start`` to ``goal`` (map frame, m). Raises :class:`NoPath`.
+    When the coarse grid finds no way, the fine grid is searched before giving up."""
     g = costmap.geom
     factor = max(1, math.ceil(math.sqrt(g.shape[0] * g.shape[1] / max_cells)))
     cost = _pool_max(costmap.cost, factor)
@@ -165,6 +167,9 @@ def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float]
         raise NoPath("the goal is inside an obstacle or outside the map")
     cells = _search(weights, s, gl)
     if cells is None:
+        if factor > 1 and fine_fallback:
+            # a gap narrower than a coarse cell may still be passable: search the fine grid
+            return plan(costmap, start, goal, max_cells=costmap.cost.size, fine_fallback=False)
         raise NoPath("no free way to the goal")
     xs = g.origin_x + (cells[:, 1] + 0.5) * res
     ys = g.origin_y + (cells[:, 0] + 0.5) * res
