@@ -124,7 +124,7 @@ def test_holding_arrow_up_drives_and_releasing_stops(operator: Any, robot: Any) 
     assert console.errors == []
 
 
-def test_joystick_and_gas_pedal_drive_and_stop(operator: Any, robot: Any) -> None:
+def test_joystick_pedal_and_wheel_drive_and_stop(operator: Any, robot: Any) -> None:
     page, console = open_teleop(operator, robot)
     for selector in ("#joystick", "#throttle"):
         wait_until(lambda: stopped(robot), what="a still robot")
@@ -139,6 +139,23 @@ def test_joystick_and_gas_pedal_drive_and_stop(operator: Any, robot: Any) -> Non
         wait_until(lambda s=start: moved_from(robot, s) > MOVED_M, what=f"{selector} to drive")
         page.mouse.up()
         wait_until(lambda: stopped(robot), what=f"the robot to stop after releasing {selector}")
+    # the steering wheel turned a quarter to the right turns the robot clockwise in place
+    assert robot.odom is not None
+    heading = robot.odom.pose.theta
+    box = page.locator("#wheel").bounding_box()
+    assert box is not None
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(cx, box["y"] + 5)
+    page.mouse.down()
+    page.mouse.move(cx + box["width"] / 2 - 5, cy, steps=6)
+    turned = wait_until(
+        lambda: robot.odom is not None
+        and math.remainder(robot.odom.pose.theta - heading, 2 * math.pi) < -0.1,
+        what="the wheel to turn the robot",
+    )
+    page.mouse.up()
+    assert turned
+    wait_until(lambda: robot.odom is not None and abs(robot.odom.twist.angular_z) < 0.02, what="a stop")
     page.close()
     assert console.errors == []
 

@@ -296,3 +296,11 @@ def test_estop_cancels_a_goal_the_brain_starts_meanwhile(robot: Any) -> None:
         assert teleop.counts["estop_cancels"] >= 1
     finally:
         robot.run(teleop.set_estop(False, "test"))
+
+
+def test_knowledge_base_routes_are_mounted_with_the_operator_login(robot: Any, client: httpx.Client) -> None:
+    """The KB's router is included; without a running KB node it says so (503) instead of failing."""
+    resp = client.get("/api/kb/documents")
+    assert resp.status_code == 503 and "knowledge base" in resp.json()["error"]
+    resp = client.delete("/api/kb/documents/1")  # a write: the operator login comes first
+    assert resp.status_code == 401
