@@ -48,8 +48,11 @@ class SlamConfig:
     search_theta_rad: float = 0.3  # (±): wheel odometry turns badly (MIT CSAIL: 0.1 rad per 0.4 s)
     search_theta_step_rad: float = 0.01
     min_track_inliers: float = 0.3  # below this the match is not trusted: dead-reckon
-    prior_sigma_xy_m: float = 0.3  # pull of the odometry prediction in ICP (weak)
-    prior_sigma_theta_rad: float = 0.2
+    # Pull of the odometry prediction in ICP: it only matters along directions the scan does
+    # not pin down (a long bare corridor); base + fraction of the step's translation.
+    prior_sigma_xy_m: float = 0.02
+    prior_sigma_xy_fraction: float = 0.1
+    prior_sigma_theta_rad: float = 0.2  # wheel odometry turns badly: keep this weak
     odom_sigma_xy_m: float = 0.05  # odometry edge noise: base + fraction of the motion
     odom_sigma_theta_rad: float = 0.03
     odom_sigma_fraction: float = 0.2
@@ -116,6 +119,7 @@ class Slam:
         self.map_version = 0  # bumps when keyframe poses change (after an optimisation)
         self._last_odom: Pose | None = None
         self._last_step: Pose = (0.0, 0.0, 0.0)  # estimated motion between the last two scans
+        self._step_dist = 0.0  # odometry translation since the previous scan (m)
         self._local: PointMap | None = None
         self._since_loop_try = 0
 
@@ -133,6 +137,7 @@ class Slam:
         step = relative(self._last_odom, odom)
         predicted = compose(self.pose, step)
         self._last_odom = odom
+        self._step_dist = math.hypot(step[0], step[1])
         match = self._track(q, predicted)
         if self._doubtful(step, match):
             # Odometry glitches (frozen, then a jump) happen: also try "as the last step" and
@@ -174,7 +179,8 @@ class Slam:
         init, _ = self._local.search(
             q, predicted, cfg.search_xy_m, cfg.search_theta_rad, cfg.search_theta_step_rad
         )
-        prior_info = np.diag([cfg.prior_sigma_xy_m**-2] * 2 + [cfg.prior_sigma_theta_rad**-2])
+        sxy = cfg.prior_sigma_xy_m + cfg.prior_sigma_xy_fraction * self._step_dist
+        prior_info = np.diag([sxy**-2, sxy**-2, cfg.prior_sigma_theta_rad**-2])
         return self._local.refine(q, init, predicted, prior_info)
 
     # ------------------------------------------------------------------ keyframes
