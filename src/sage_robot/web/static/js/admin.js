@@ -1,5 +1,5 @@
 // Admin: knowledge base, places (list, add at the robot or a clicked point), node health, logs.
-import { $, api, el, healthRows, LiveSocket } from "./common.js";
+import { $, api, checkLogin, el, healthRows, LiveSocket } from "./common.js";
 import { LiveMap } from "./livemap.js";
 
 const REFRESH_MS = 3000;
@@ -42,7 +42,7 @@ const map = new LiveMap($("map"), {
     $("p-y").value = y.toFixed(2);
   },
 });
-new LiveSocket("/ws/live", { onMessage: (msg) => map.update(msg) });
+new LiveSocket("/ws/live", { onMessage: (msg) => map.update(msg), onState: (up) => up || checkLogin() });
 window.sageMap = map; // for debugging from the console (and the browser tests)
 
 async function loadInfo() {

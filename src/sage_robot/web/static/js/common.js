@@ -131,3 +131,9 @@ export function healthRows(tbody, nodes) {
     );
   }
 }
+
+/** Operator pages: when a socket drops, check the session; if it expired, go to the login. */
+export async function checkLogin() {
+  const { ok, data } = await api("/api/whoami");
+  if (ok && !data.operator) location.href = `/login?next=${encodeURIComponent(location.pathname)}`;
+}

@@ -1,5 +1,5 @@
 // Operator teleop: camera, driving, e-stop, live map, places, events.
-import { $, api, batteryText, el, LiveSocket } from "./common.js";
+import { $, api, batteryText, checkLogin, el, LiveSocket } from "./common.js";
 import { Drive } from "./drive.js";
 import { LiveMap } from "./livemap.js";
 
@@ -9,7 +9,10 @@ const MAX_EVENTS = 200;
 // ---------------------------------------------------------------- control link
 let estop = false;
 const teleop = new LiveSocket("/ws/teleop", {
-  onState: (up) => $("link").classList.toggle("up", up),
+  onState: (up) => {
+    $("link").classList.toggle("up", up);
+    if (!up) checkLogin();
+  },
   onMessage: (msg) => {
     if (msg.type === "estop") showEstop(msg.engaged);
     else if (msg.type === "error") $("teleop-error").textContent = msg.error;
