@@ -24,6 +24,9 @@ def run(args: argparse.Namespace) -> int:
         results = [Check("profile", False, str(exc), "fix the profile as the message says")]
     else:
         results = [Check("profile", True, args.profile or "built-in simulated robot"), *run_checks(settings)]
+    if not args.json:
+        print("Checking this machine and the real robot's devices "
+              "(the simulator, `sage sim`, needs none of them).")
     if args.json:
         print(json.dumps([r.__dict__ for r in results], indent=2))
     else:

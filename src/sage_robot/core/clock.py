@@ -11,6 +11,7 @@ import asyncio
 import heapq
 import inspect
 import itertools
+import logging
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Awaitable, Callable
@@ -20,6 +21,10 @@ T = TypeVar("T")
 
 SETTLE_ROUNDS = 8  # event-loop turns given to woken tasks after each simulated step
 TIME_EPS_S = 1e-9  # deadlines this close to "now" count as reached (float steps)
+LAG_WARN_S = 2.0  # a paced simulation this far behind its real-time factor says so
+LAG_WARN_EVERY_S = 30.0  # ... at most once per this many wall seconds
+
+_log = logging.getLogger("sage.clock")
 
 
 class Clock(ABC):
@@ -138,6 +143,7 @@ class SimClock(Clock):
         """
         wall0, sim0 = time.monotonic(), self._now
         k = 0  # steps taken: time is sim0 + k * step_s, so float errors do not accumulate
+        last_warn = -LAG_WARN_EVERY_S
         while (until is None or self._now < until - TIME_EPS_S) and not (stop and stop.is_set()):
             if on_step is not None:
                 result = on_step(step_s)
@@ -149,6 +155,20 @@ class SimClock(Clock):
                 ahead = (self._now - sim0) / speed - (time.monotonic() - wall0)
                 if ahead > 0:
                     await asyncio.sleep(ahead)
+                elif -ahead > LAG_WARN_S:
+                    last_warn = self._warn_lag(wall0, sim0, speed, last_warn)
+
+
+    def _warn_lag(self, wall0: float, sim0: float, speed: float, last_warn: float) -> float:
+        wall = time.monotonic()
+        if wall - last_warn < LAG_WARN_EVERY_S:
+            return last_warn
+        factor = (self._now - sim0) / max(wall - wall0, 1e-9)
+        _log.warning(
+            "simulation is slower than asked: %.2fx real time instead of %.2fx (the machine is busy)",
+            factor, speed,
+        )
+        return wall
 
 
 class Timer:
