@@ -288,6 +288,14 @@ def test_face_follows_ui_state_and_doa(browser: Any, robot: Any) -> None:
     assert page.text_content("#reply") == "Follow me!"
     assert page.text_content("#heard") == "where is the lab?"
     page.screenshot(path=str(robot.artifacts / "face-speaking.png"))
+    # the kiosk reconnects by itself: drop every connection server-side (as a restart would)
+    def drop_all() -> None:
+        for conn in list(robot.web_node().server.server_state.connections):
+            conn.shutdown()
+
+    robot.call(drop_all)
+    page.wait_for_selector("#link:not(.up)", timeout=WAIT_S * 1000)
+    page.wait_for_selector("#link.up", timeout=WAIT_S * 1000)
     robot.publish(topics.UI_STATE, UiState(Phase.THINKING))
     page.wait_for_selector("body[data-phase=thinking]", timeout=WAIT_S * 1000)
     # in simulation the kiosk plays the robot's voice: 0.1 s chunks of a 440 Hz tone
