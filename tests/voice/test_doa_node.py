@@ -7,6 +7,7 @@ import asyncio
 import math
 import struct
 
+import numpy as np
 import pytest
 
 from sage_robot.core.bus import Bus
@@ -123,3 +124,21 @@ async def test_real_mode_without_device_falls_back_to_front():
     settings = Settings.model_validate({"voice": {"enabled": False, "source": "mic"}})
     got, _ = await run_node(settings, 30)
     assert got and {(d.angle_deg, d.source) for d in got} == {(180.0, "fixed")}
+
+
+async def test_sim_mic_skips_only_silence_when_its_reader_falls_behind():
+    from sage_robot.sim.audio import SimMicrophone
+
+    clock = SimClock()
+    mic = SimMicrophone(clock)
+    first = asyncio.create_task(mic.read())
+    await asyncio.sleep(0)  # the read starts: the clock is at 0
+    await clock.step(0.1)
+    await asyncio.wait_for(first, 5)
+    await clock.step(10.0)  # the reader slept through 10 s of nothing
+    await asyncio.wait_for(mic.read(), 5)
+    assert mic.skipped >= 115 and mic.frame_time == pytest.approx(clock.now(), abs=0.2)
+    mic.inject(np.full(16000, 1000, dtype=np.int16))  # a visitor speaks: nothing is skipped
+    await clock.step(10.0)
+    frames = [await asyncio.wait_for(mic.read(), 5) for _ in range(12)]
+    assert min(int(f.mean()) for f in frames) > 900 and mic.skipped < 130

@@ -73,7 +73,7 @@ def cmd_wake(args: argparse.Namespace) -> int:
         raise ConfigError(f"--threshold must be between 0 and 1, got {threshold}")
     pcm = load_audio(args.file)
     engine = OpenWakeWordEngine(args.model or vs.wake_models)
-    detector = WakeDetector(engine, threshold, vs.wake_refractory_s)
+    detector = WakeDetector(engine, threshold, vs.wake_refractory_s, patience=vs.wake_patience_frames)
     found = detector.feed(pcm)
     out = {
         "file": args.file,
@@ -133,7 +133,8 @@ async def _listen(vs: Any, seconds: float | None) -> int:
 
     mic = SoundDeviceMicrophone(vs.mic_device, vs.mic_channel)
     print("loading models...", file=sys.stderr)
-    wake = WakeDetector(OpenWakeWordEngine(vs.wake_models), vs.wake_threshold, vs.wake_refractory_s)
+    wake = WakeDetector(OpenWakeWordEngine(vs.wake_models), vs.wake_threshold, vs.wake_refractory_s,
+                        patience=vs.wake_patience_frames)
     vad, stt = SileroVad(), SpeechToText(vs.stt_model, vs.stt_device, vs.stt_compute_type)
     rec = UtteranceRecorder(vs.vad_threshold, vs.vad_silence_s, vs.vad_preroll_s, vs.max_utterance_s,
                             start_timeout_s=float("inf"))  # fmt: skip

@@ -25,6 +25,7 @@ RATE = 16000  # Hz, the microphone's rate
 FRAME_SAMPLES = 1280  # 80 ms
 FRAME_S = FRAME_SAMPLES / RATE
 SPEAKER_BUFFER_S = 0.3  # audio queued ahead in the (simulated) sound card (s)
+MAX_LAG_S = 0.5  # a reader further behind the clock than this skips silent frames
 NOISE_FLOOR_RMS = 30.0  # int16 units: about -60 dBFS of room noise
 ECHO_GAIN = 0.5  # fraction of the speaker's signal that reaches the microphone
 MAX_UTTERANCES_KEPT = 50  # the speaker's memory of past utterances (tests, web)
@@ -55,6 +56,7 @@ class SimMicrophone:
         self.closed = False
         self.waiting = False  # True while read() waits for its frame's time
         self.frame_time: float | None = None  # clock time the last frame read ends
+        self.skipped = 0  # silent frames skipped because the reader fell behind
 
     async def lockstep(self, dt: float = 0.0, poll_s: float = 0.0005) -> None:
         """A SimClock ``on_step`` hook: hold the clock until the reader asked for its next
@@ -112,6 +114,7 @@ class SimMicrophone:
         """The next 80 ms frame, at its time on the clock."""
         if self._t0 is None:
             self._t0 = self._echo_t = self.clock.now()
+        self._skip_silence_when_behind()
         self.frames += 1
         if self.paced:
             self.waiting = True
@@ -127,6 +130,18 @@ class SimMicrophone:
         self._echo_t = (self._echo_t or 0.0) + FRAME_S
         self.frame_time = self._t0 + self.frames * FRAME_S
         return np.clip(np.round(x), -32768, 32767).astype(np.int16)
+
+    def _skip_silence_when_behind(self) -> None:
+        """A reader slower than simulated time (``sage sim --fast``) skips ahead over frames
+        with nothing in them but the noise floor, as a real mic's full buffer drops audio;
+        a visitor's words and the robot's echo are never skipped."""
+        assert self._t0 is not None and self._echo_t is not None
+        behind = self.clock.now() - (self._t0 + self.frames * FRAME_S)
+        if behind > MAX_LAG_S and not self._voice and len(self._echo) == 0:
+            skip = int(behind / FRAME_S) - 1  # the next frame stays due now, not later
+            self.frames += skip
+            self._echo_t += skip * FRAME_S
+            self.skipped += skip
 
     def close(self) -> None:
         self.closed = True

@@ -70,8 +70,10 @@ def build_pipeline(
     models.wake.reset()
     models.wake_self.reset()
     mouth = Mouth(bus, clock, models.speech, speaker,
-                  reference=WakeDetector(models.wake_self, s.wake_threshold, s.wake_refractory_s))
-    wake = WakeDetector(models.wake, s.wake_threshold, s.wake_refractory_s)  # fmt: skip
+                  reference=WakeDetector(models.wake_self, s.wake_threshold, s.wake_refractory_s,
+                                         patience=1))
+    wake = WakeDetector(models.wake, s.wake_threshold, s.wake_refractory_s,
+                        patience=s.wake_patience_frames)  # fmt: skip
     return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt)
 
 

@@ -30,11 +30,12 @@ from sage_robot.core.msgs.voice import Phase, TurnLatency, UiState
 from sage_robot.core.topics import CONVERSE, HEARD, SAY, TURN_LATENCY, UI_STATE
 from sage_robot.hardware.audio import Microphone
 from sage_robot.voice.player import Mouth
-from sage_robot.voice.stt import SpeechToText
+from sage_robot.voice.stt import SpeechToText, Transcript
 from sage_robot.voice.vad import EndReason, SileroVad, Utterance, UtteranceRecorder
 from sage_robot.voice.wake import Detection, WakeDetector
 
 SELF_ECHO_WINDOW_S = 2.5  # a wake heard this soon after the robot "said" one is its own echo
+EARLY_STT_S = 0.3  # silence after which transcription starts, before the utterance is closed
 WAKE_TAIL_S = 0.24  # audio right after a detection is the end of the wake phrase: skipped
 NO_BRAIN = "Sorry, my brain is not running right now."
 BRAIN_FAILED = "Sorry, I could not come up with an answer."
@@ -98,6 +99,7 @@ class VoicePipeline:
         self._skip_s = 0.0
         self._follow_up = False
         self._say_task: asyncio.Task[int] | None = None
+        self._early: tuple[float, asyncio.Future[Transcript]] | None = None  # (speech_s, STT)
         self.mouth.on_viseme = self._viseme
 
     # ------------------------------------------------------------ ui state
@@ -146,6 +148,22 @@ class VoicePipeline:
             utt = self.recorder.push(frame, prob)
             if utt is not None:
                 self._on_utterance(utt)
+            else:
+                self._transcribe_early()
+
+    def _transcribe_early(self) -> None:
+        """Start Whisper on a pause that will probably end the utterance: if nothing more
+        is said, the transcript is ready sooner; if the visitor goes on, it is dropped."""
+        rec = self.recorder
+        if not rec.started:
+            return
+        if self._early is not None and rec.speech_s != self._early[0]:
+            self._early = None  # the visitor spoke again
+        if self._early is None and rec.silent_s >= EARLY_STT_S:
+            pcm = rec.snapshot()
+            fut = asyncio.ensure_future(asyncio.to_thread(self.stt.transcribe, pcm))
+            fut.add_done_callback(lambda f: f.cancelled() or f.exception())  # dropped: no warning
+            self._early = (rec.speech_s, fut)
 
     def _own_voice(self, det: Detection, frame_t: float) -> bool:
         t = self.mouth.last_self_wake
@@ -179,6 +197,7 @@ class VoicePipeline:
         self.recorder.reset()
         self.recorder.start_timeout_s = timeout_s
         self.vad.reset()
+        self._early = None
         self._skip_s = 0.0 if follow_up else WAKE_TAIL_S
         self._set_ui(phase=Phase.LISTENING, asr_partial="", asr_final="", llm_tokens="",
                      error_msg="", tts_viseme=0.0)  # fmt: skip
@@ -195,15 +214,24 @@ class VoicePipeline:
         self._times.end_of_speech = self.clock.now()
         self.state = State.BUSY
         self._set_ui(phase=Phase.THINKING)
+        early = None
+        if self._early is not None and self._early[0] == utt.speech_s and utt.reason is EndReason.SILENCE:
+            early = self._early[1]
+        self._early = None
         self._turn_task = asyncio.get_running_loop().create_task(
-            self._turn(utt, self._times), name="voice.turn"
+            self._turn(utt, self._times, early), name="voice.turn"
         )
 
     # ------------------------------------------------------------ one turn
-    async def _turn(self, utt: Utterance, times: TurnTimes) -> None:
+    async def _turn(
+        self, utt: Utterance, times: TurnTimes, early: asyncio.Future[Transcript] | None = None
+    ) -> None:
         follow_up = False
         try:
-            transcript = await asyncio.to_thread(self.stt.transcribe, utt.pcm)
+            if early is not None:
+                transcript = await early
+            else:
+                transcript = await asyncio.to_thread(self.stt.transcribe, utt.pcm)
             times.stt_done = self.clock.now()
             times.transcript = transcript.text
             self.log.info("heard", text=transcript.text, reason=utt.reason.value,

@@ -136,6 +136,20 @@ class UtteranceRecorder:
     def started(self) -> bool:
         return self._started
 
+    @property
+    def silent_s(self) -> float:
+        """Silence since the last speech frame of a started utterance (s)."""
+        return self._silent_s
+
+    @property
+    def speech_s(self) -> float:
+        """Speech so far; it grows only when the visitor speaks (a version number)."""
+        return self._speech_s
+
+    def snapshot(self) -> np.ndarray:
+        """The utterance so far (pre-roll included)."""
+        return np.concatenate(self._frames) if self._frames else np.zeros(0, dtype=np.int16)
+
     def push(self, frame: np.ndarray, prob: float) -> Utterance | None:
         """Add one frame; returns the utterance when it has ended."""
         speech = prob >= self.threshold

@@ -28,6 +28,7 @@ WARMUP_SAMPLES = 16000 * 4  # 4 s: openWakeWord's feature history at start-up
 WARMUP_SEED = 1234  # seeds the start-up history so every run scores the same
 WARMUP_AMPLITUDE = 1000  # int16 peak of that start-up noise (openWakeWord's value)
 DEFAULT_REFRACTORY_S = 2.0
+DEFAULT_PATIENCE = 2  # frames in a row over threshold: a real wake word gives 5-14, a spike 1
 
 
 class WakeEngine(Protocol):
@@ -146,8 +147,10 @@ class Detection:
 
 
 class WakeDetector:
-    """Threshold + refractory over an engine; accepts chunks of any length.
+    """Threshold, patience and refractory over an engine; accepts chunks of any length.
 
+    A detection needs ``patience`` frames in a row at or over the threshold (isolated
+    one-frame spikes on words like "Alex" are not wake words).
     After a detection the same model is ignored for ``refractory_s`` (the score stays
     high for several frames while the phrase ends; one utterance is one detection).
     """
@@ -158,8 +161,13 @@ class WakeDetector:
         threshold: float = 0.6,
         refractory_s: float = DEFAULT_REFRACTORY_S,
         keep_scores: bool = False,
+        patience: int = DEFAULT_PATIENCE,
     ) -> None:
+        if patience < 1:
+            raise ValueError(f"patience must be >= 1 frame, got {patience}")
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
+        self.patience = patience
+        self._run: dict[str, int] = {}  # frames in a row over threshold, per model
         self.keep_scores = keep_scores
         self.scores: list[dict[str, float]] = []  # every frame's scores, with keep_scores
         self._framer = Framer(FRAME_SAMPLES)
@@ -177,6 +185,7 @@ class WakeDetector:
         self._framer.reset()
         self.frames = 0
         self._last.clear()
+        self._run.clear()
         self.max_scores = dict.fromkeys(self.engine.names, 0.0)
 
     def feed(self, chunk: np.ndarray) -> list[Detection]:
@@ -196,7 +205,8 @@ class WakeDetector:
         t = self.time_s
         for name, s in scores.items():
             self.max_scores[name] = max(self.max_scores.get(name, 0.0), s)
-            if s < self.threshold:
+            self._run[name] = self._run.get(name, 0) + 1 if s >= self.threshold else 0
+            if self._run[name] < self.patience:
                 continue
             last = self._last.get(name)
             if last is not None and t - last < self.refractory_s:

@@ -55,6 +55,9 @@ class VoiceSettings(Section):
     wake_refractory_s: float = Field(
         2.0, ge=0, description="After a detection, ignore the same model for this long (s)."
     )
+    wake_patience_frames: int = Field(
+        2, ge=1, description="80 ms frames in a row over the threshold for a detection."
+    )
     vad_threshold: float = Field(0.6, ge=0, le=1, description="Speech probability threshold.")
     vad_silence_s: float = Field(0.7, gt=0, description="Silence that ends an utterance (s).")
     vad_preroll_s: float = Field(0.4, ge=0, description="Audio kept before speech starts (s).")
