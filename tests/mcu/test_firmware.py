@@ -101,8 +101,9 @@ def test_pwm_stays_in_the_esc_range_and_stop_is_1500():
         assert 1300 <= pwm <= 1700
     assert max(s.fw.pwm_us) == 1700  # saturated
     s.cmd = (0.0, 0.0)
-    s.run(0.02)
-    assert s.fw.pwm_us == (1500.0, 1500.0)
+    p = s.fw.params
+    s.run(max(p.max_cmd_v_mps / p.cmd_accel_mps2, p.max_cmd_w_radps / p.cmd_alpha_radps2) + 0.05)
+    assert s.fw.pwm_us == (1500.0, 1500.0)  # the profile ramped down: the ESC's stop
 
 
 def test_watchdog_ramps_to_zero_after_550_ms_without_commands():
@@ -241,3 +242,52 @@ def test_slip_loses_distance_and_noise_makes_heading_wobble():
     noisy.run(3.0)
     thetas = [math.remainder(f.values[2], 2 * math.pi) for f in noisy.frames if f.kind is proto.ODOM]
     assert np.std(thetas) > 1e-3  # wobbly
+
+
+STEP_SETTLE_BAND = 0.05  # "reached": within 5 % of the command from then on
+STEP_OVERSHOOT_MAX = 0.05  # at most 5 % past the command
+
+
+@pytest.mark.parametrize(("cmd", "settle_s"), [((0.5, 0.0), 0.8), ((0.0, -0.8), 0.45), ((0.3, 0.5), 0.6)])
+def test_step_response_reaches_the_command_quickly_without_overshoot(cmd, settle_s):
+    fw = FirmwareModel(FirmwareParams(), np.random.default_rng(1))
+    floor = FlatFloor()
+    twists = []
+    for k in range(200):  # 2 s, the command re-sent every 50 ms as the bridge does
+        if k % 5 == 0:
+            fw.receive(proto.encode(proto.CMD, cmd))
+        wheels = fw.control_step(DT, (k + 1) * DT)
+        v, w = floor.step(DT, wheels)
+        fw.sense(DT, v, w)
+        twists.append((v, w))
+    arr = np.array(twists)
+    for axis, goal in enumerate(cmd):
+        if goal == 0.0:
+            assert np.abs(arr[:, axis]).max() < 0.01
+            continue
+        off = np.nonzero(np.abs(arr[:, axis] - goal) > STEP_SETTLE_BAND * abs(goal))[0]
+        assert (off[-1] + 1) * DT <= settle_s, f"axis {axis} settles at {(off[-1] + 1) * DT} s"
+        assert np.abs(arr[:, axis]).max() <= abs(goal) * (1 + STEP_OVERSHOOT_MAX)
+
+
+def test_a_timed_quarter_turn_turns_a_quarter():
+    """Forward, a timed 90 deg turn, forward again (the teleop scenario): the heading the
+    robot ends with is the commanded one. The wheel that changes speed most must not
+    saturate longer at the end of the turn than at its start (once ~8 deg too far)."""
+    fw = FirmwareModel(FirmwareParams(), np.random.default_rng(1))
+    floor = FlatFloor()
+    turn_s = 1.96
+    plan = [(0.0, (0.4, 0.0)), (3.0, (0.0, -0.8)), (3.0 + turn_s, (0.6, 0.0))]
+    cmd = plan[0][1]
+    for k in range(800):
+        t = k * DT
+        for at, c in plan:
+            if abs(t - at) < DT / 2:
+                cmd = c
+                fw.receive(proto.encode(proto.CMD, cmd))  # the bridge writes on every change
+        if k % 5 == 0:
+            fw.receive(proto.encode(proto.CMD, cmd))
+        v, w = floor.step(DT, fw.control_step(DT, t + DT))
+        fw.sense(DT, v, w)
+    assert math.degrees(floor.pose[2]) == pytest.approx(math.degrees(-0.8 * turn_s), abs=0.5)
+    assert floor.pose[0] == pytest.approx(0.4 * 3.0, abs=0.1)  # ideal: 1.2 m east

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +18,7 @@ from sage_robot.app.runtime import make_context, run_launcher
 from sage_robot.core import topics
 from sage_robot.core.config import load_profile
 from sage_robot.core.errors import ConfigError
+from sage_robot.core.geometry import wrap_angle
 from sage_robot.core.msgs import CompressedImage, Event, LaserScan, Odometry
 from sage_robot.core.msgs.sim import People, SpeakerBearing
 from sage_robot.core.msgs.voice import Doa
@@ -160,6 +162,30 @@ async def test_teleop_scenario_drives_down_the_corridor() -> None:
     assert world.collisions == 0
     assert world.x == pytest.approx(50.0, abs=0.3)  # in the corridor's middle
     assert world.y < 57.5 - 6.0  # drove south
+
+
+async def _teleop_end(node_names: tuple[str, ...]) -> Any:
+    from sage_robot.app.runtime import specs_for
+
+    scenario = load_scenario("teleop_drive")
+    settings = load_profile(
+        None, {"sim": {"speed": None, "camera_hz": 0, **scenario.settings_overrides()["sim"]}}
+    )
+    ctx = make_context(settings, simulated=True)
+    ctx.resources[SCENARIO_RESOURCE] = scenario
+    specs = [s for s in specs_for("sim") if s.name in node_names]
+    await run_launcher(ctx, specs, until=scenario.duration_s)
+    return ctx.resources[WORLD_RESOURCE]
+
+
+async def test_teleop_through_the_serial_bridge_and_firmware_follows_direct_drive() -> None:
+    """/cmd_vel -> bridge -> pty -> firmware model (PI, ESC, motors) -> world ends where
+    the ideal direct drive does: a loose drive chain (over-rotated turn) hits the wall."""
+    direct = await _teleop_end(("sim_world",))
+    chain = await _teleop_end(("sim_world", "mcu_sim", "serial_bridge"))
+    assert direct.collisions == 0 and chain.collisions == 0
+    assert math.hypot(chain.x - direct.x, chain.y - direct.y) < 0.3, (chain.pose, direct.pose)
+    assert abs(wrap_angle(chain.pose[2] - direct.pose[2])) < math.radians(1.0)
 
 
 def test_web_addresses_and_node_selection_errors() -> None:

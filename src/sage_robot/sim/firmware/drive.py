@@ -28,14 +28,18 @@ class WheelController:
         self.integral = 0.0  # duty
         self.measured = 0.0  # filtered measured speed (m/s)
 
-    def step(self, target: float, measured: float, dt: float, volt_scale: float) -> float:
+    def step(
+        self, target: float, measured: float, dt: float, volt_scale: float, integrate: bool = True
+    ) -> float:
+        """``integrate`` False while the target is still ramping: the motor's lag behind a
+        ramp is no steady error, and integrating it winds up into overshoot."""
         p = self.p
         self.measured += p.speed_filter_alpha * (measured - self.measured)
         if abs(target) < STOP_EPS_MPS:
             self.integral = 0.0
             return 0.0
         error = target - self.measured
-        if abs(error) < p.integrate_band_mps:  # conditional integration: no windup while accelerating
+        if integrate and abs(error) < p.integrate_band_mps:  # conditional integration
             self.integral += p.ki_duty_per_m * error * dt
         self.integral = max(-p.integral_limit_duty, min(p.integral_limit_duty, self.integral))
         feedforward = target / (p.free_speed_mps * max(volt_scale, 1e-3))

@@ -12,6 +12,7 @@ One simulation step, in order (the simulator calls them with its step ``dt``, s)
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 
 import numpy as np
@@ -60,6 +61,7 @@ class FirmwareModel:
         self._last_cmd_t: float | None = None
         self._cmd = (0.0, 0.0)
         self._targets = (0.0, 0.0)  # wheel speed targets after the watchdog ramp (m/s)
+        self._profile = (0.0, 0.0)  # the command slewed at the body limits (v m/s, w rad/s)
         self._pwm = (PWM_STOP_US, PWM_STOP_US)
         self._duty = (0.0, 0.0)
         self._next_odom = ODOM_PERIOD_S  # first frames one period after power-up
@@ -117,24 +119,29 @@ class FirmwareModel:
     def control_step(self, dt: float, now: float) -> tuple[float, float]:
         p = self.params
         self._now = now
-        goal = wheel_targets(*self._cmd, p.track_width_m)
         if self._last_cmd_t is None or now - self._last_cmd_t > p.watchdog_s:
             if not self._tripped and self._last_cmd_t is not None:
                 self.watchdog_trips += 1
             self._tripped = self._last_cmd_t is not None
-            goal = (0.0, 0.0)
             # Ramp toward zero instead of stopping dead.
             drop = p.watchdog_ramp_mps2 * dt
             self._targets = tuple(  # type: ignore[assignment]
                 0.0 if abs(t) <= drop else t - drop * np.sign(t) for t in self._targets
             )
+            left, right = self._targets
+            self._profile = (0.5 * (left + right), (right - left) / p.track_width_m)
         else:
-            self._targets = goal
+            v, w = self._profile
+            v = _slew(v, self._cmd[0], p.cmd_accel_mps2 * dt)
+            w = _slew(w, self._cmd[1], p.cmd_alpha_radps2 * dt)
+            self._profile = (v, w)
+            self._targets = wheel_targets(v, w, p.track_width_m)
         volt_scale = self.battery.voltage / p.nominal_voltage_v
         v_odo, w_odo = self.odometry.v_tick, self.odometry.w_tick
         measured = wheel_targets(v_odo, w_odo, p.track_width_m)
+        settled = self._profile == self._cmd
         duties = tuple(
-            c.step(t, m, dt, volt_scale)
+            c.step(t, m, dt, volt_scale, settled)
             for c, t, m in zip(self.controllers, self._targets, measured, strict=True)
         )
         self._duty = (float(duties[0]), float(duties[1]))
@@ -171,6 +178,11 @@ class FirmwareModel:
         """Both PWM outputs at stop and both wheels at rest."""
         at_rest = all(abs(s) < STOP_EPS_MPS for s in self.wheel_speeds)
         return at_rest and self._pwm == (PWM_STOP_US, PWM_STOP_US)
+
+
+def _slew(value: float, goal: float, step: float) -> float:
+    """``value`` moved toward ``goal`` by at most ``step``."""
+    return goal if abs(goal - value) <= step else value + math.copysign(step, goal - value)
 
 
 def _next_due(due: float, period: float, now: float) -> float:

@@ -61,6 +61,13 @@ class FirmwareParams:
     integral_limit_duty: float = 0.3
     integrate_band_mps: float = 0.08  # integrate only when the speed error is below this
     speed_filter_alpha: float = 0.3  # low-pass on the measured wheel speed (0..1 per tick)
+    # Command profile: the received (v, w) is slewed at these body rates before it becomes
+    # wheel targets. Their sum at a wheel (a + alpha Lw / 2 = 1.37 m/s^2) stays inside
+    # max_accel_mps2, so neither wheel saturates and a turn starts and stops with the same
+    # lag (without it the wheel that changes most saturates longer at the end of a turn
+    # than at its start and the robot over-rotates, ~6 deg per quarter turn).
+    cmd_accel_mps2: float = 0.8
+    cmd_alpha_radps2: float = 3.0
     watchdog_s: float = WATCHDOG_S
     watchdog_ramp_mps2: float = 2.0  # how fast the targets ramp to zero after a trip
     max_cmd_v_mps: float = 1.0  # the firmware's own clamp on a received command
