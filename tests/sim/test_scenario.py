@@ -131,6 +131,25 @@ def test_sage_sim_headless_runs_a_scenario_and_prints_a_summary(tmp_path: Path) 
     assert summary["nodes_failed"] == [] and summary["real_time_factor"] > 0
 
 
+def test_headless_runs_open_no_listeners_and_print_a_tidy_summary(capsys: Any) -> None:
+    from sage_robot.app.runtime import specs_for
+    from sage_robot.cli.run import _print_summary, sim_specs
+
+    full = {s.name for s in specs_for("sim")}
+    assert {"web", "foxglove"} <= full  # present when someone watches...
+    headless = {s.name for s in sim_specs(True)}
+    assert headless == full - {"web", "foxglove"}  # ...never in a one-shot run
+    with pytest.raises(ConfigError, match="foxglove not in the sim profile"):
+        sim_specs(True, "sim_world,foxglove")
+    base = {"sim_time_s": 1.0, "wall_time_s": 1.0, "real_time_factor": 1.0, "distance_m": 1.0,
+            "pose": [1.0, 2.0, 0.0], "goals": [], "nodes_restarted": []}  # fmt: skip
+    _print_summary({**base, "collisions": 0, "collisions_by_kind": {}}, as_json=False)
+    _print_summary({**base, "collisions": 1, "collisions_by_kind": {"wall": 1}}, as_json=False)
+    out = capsys.readouterr().out
+    assert "collisions: 0, final pose [1.0, 2.0, 0.0]" in out
+    assert "collisions: 1 {'wall': 1}, final pose" in out
+
+
 def test_sage_sim_reports_a_bad_scenario_in_one_line(tmp_path: Path) -> None:
     proc = run_cli("sim", "--headless", "--scenario", str(write(tmp_path, "events: 3\n")), timeout=60)
     assert proc.returncode == 2

@@ -19,7 +19,7 @@ from sage_robot.app.runtime import make_context, run_launcher, specs_for
 from sage_robot.core.config import Settings, load_profile
 from sage_robot.core.errors import ConfigError
 
-HEADLESS_SKIP = {"web"}  # nodes a headless run leaves out
+HEADLESS_SKIP = {"web", "foxglove"}  # network listeners: a headless run opens none
 WEB_NODE = "web"
 
 
@@ -77,6 +77,24 @@ def web_addresses(settings: Settings) -> list[str]:
     return [f"{base}{p}" for p in pages if p != "/login"] or [f"{base}/"]
 
 
+def sim_specs(headless: bool, nodes: str | None = None) -> list[Any]:
+    """The sim profile's node specs; ``headless`` leaves out every network listener
+    (web, Foxglove) so one-shot runs can run side by side; ``nodes``: a comma-separated
+    selection."""
+    specs = [s for s in specs_for("sim") if not (headless and s.name in HEADLESS_SKIP)]
+    if nodes:
+        wanted = [n.strip() for n in nodes.split(",") if n.strip()]
+        unknown = sorted(set(wanted) - {s.name for s in specs})
+        if unknown:
+            raise ConfigError(
+                f"--nodes: {', '.join(unknown)} not in the sim profile"
+                f"{' (headless runs open no listeners)' if headless else ''}; it has "
+                f"{', '.join(s.name for s in specs)}"
+            )
+        specs = [s for s in specs if s.name in wanted]
+    return specs
+
+
 def run_sim(args: argparse.Namespace) -> int:
     from sage_robot.sim.node import SCENARIO_RESOURCE, SUMMARY_RESOURCE, WORLD_RESOURCE
     from sage_robot.sim.scenario import load_scenario
@@ -89,16 +107,7 @@ def run_sim(args: argparse.Namespace) -> int:
     ctx = make_context(settings, simulated=True)
     if scenario is not None:
         ctx.resources[SCENARIO_RESOURCE] = scenario
-    specs = [s for s in specs_for("sim") if not (args.headless and s.name in HEADLESS_SKIP)]
-    if args.nodes:
-        wanted = [n.strip() for n in args.nodes.split(",") if n.strip()]
-        unknown = sorted(set(wanted) - {s.name for s in specs})
-        if unknown:
-            raise ConfigError(
-                f"--nodes: {', '.join(unknown)} not in the sim profile; it has "
-                f"{', '.join(s.name for s in specs)}"
-            )
-        specs = [s for s in specs if s.name in wanted]
+    specs = sim_specs(args.headless, args.nodes)
     names = [s.name for s in specs]
     speed = "as fast as possible" if settings.sim.speed is None else f"{settings.sim.speed:g}x real time"
     if not args.json:
@@ -138,9 +147,10 @@ def _print_summary(summary: dict[str, Any], as_json: bool) -> None:
         f"({summary['real_time_factor']}x real time)"
     )
     if "distance_m" in summary:
+        kinds = summary["collisions_by_kind"]
         print(
-            f"robot drove {summary['distance_m']:.2f} m, collisions: {summary['collisions']} "
-            f"{summary['collisions_by_kind'] or ''}, final pose {summary['pose']}"
+            f"robot drove {summary['distance_m']:.2f} m, collisions: {summary['collisions']}"
+            f"{' ' + str(kinds) if kinds else ''}, final pose {summary['pose']}"
         )
     for goal in summary["goals"]:
         print(f"goal {goal['goal']}: {goal.get('status', 'running')} {goal.get('message', '')}".rstrip())
