@@ -131,6 +131,29 @@ def test_sage_sim_headless_runs_a_scenario_and_prints_a_summary(tmp_path: Path) 
     assert summary["nodes_failed"] == [] and summary["real_time_factor"] > 0
 
 
+@pytest.mark.parametrize("watched", [False, True])
+async def test_the_camera_renders_only_for_a_subscriber(watched: bool) -> None:
+    settings = load_profile(None, {"sim": {"speed": None, "camera_hz": 15, "pedestrians": 0}})
+    ctx = make_context(settings, simulated=True)
+    frames: list[CompressedImage] = []
+    if watched:
+        ctx.bus.subscribe(topics.CAMERA, CompressedImage, frames.append, maxsize=100)
+    launcher = await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=2.0)
+    rendered = launcher.nodes["sim_world"].frames  # type: ignore[attr-defined]
+    assert (rendered > 0) is watched and len(frames) == rendered
+
+
+def test_headless_sets_no_camera_frames() -> None:
+    import argparse
+
+    from sage_robot.cli.run import _overrides
+
+    args = argparse.Namespace(speed=None, fast=True, seed=None, headless=True)
+    assert _overrides(args, None)["sim"]["camera_hz"] == 0
+    args.headless = False
+    assert "camera_hz" not in _overrides(args, None).get("sim", {})
+
+
 def test_headless_runs_open_no_listeners_and_print_a_tidy_summary(capsys: Any) -> None:
     from sage_robot.app.runtime import specs_for
     from sage_robot.cli.run import _print_summary, sim_specs

@@ -62,6 +62,8 @@ def _overrides(args: argparse.Namespace, scenario: Any) -> dict[str, Any]:
         sim["speed"] = None
     if args.seed is not None:
         sim["seed"] = args.seed
+    if args.headless:
+        sim["camera_hz"] = 0  # nobody can watch: no frames rendered at all
     base = scenario.settings_overrides() if scenario is not None else {}
     return _merge(base, {"sim": sim} if sim else {})
 

@@ -7,7 +7,8 @@ At the very start of ``setup`` (before any ``await``) it puts the :class:`World`
 simulated clock: the lidar scan (10 Hz, ``/scan``), ground truth (50 Hz,
 ``/sim/ground_truth``), people and the speaker's bearing (10 Hz), collisions as they
 happen, and camera frames (``camera_hz`` frames per *wall* second: an operator watches
-in real time, so a 50x run does not render 50x the frames).
+in real time, so a 50x run does not render 50x the frames; and only while something
+subscribes to the camera topic: nobody watching, nothing rendered).
 
 With no "mcu_sim" node in the launch, it drives the body itself from ``/cmd_vel``
 (ideal tracking, the MCU's 0.55 s watchdog), so a world-only run still moves.
@@ -178,8 +179,13 @@ class WorldNode(Node):
         wall = time.monotonic()  # camera frames are paced in wall time (see the module doc)
         if wall - self._camera_wall >= self._camera_period_wall:
             self._camera_wall = wall
-            self.bus.publish(topics.CAMERA, w.camera_msg(t))
-            self.frames += 1
+            if self._camera_watched():  # rendering costs ~45 % of the loop: only for a viewer
+                self.bus.publish(topics.CAMERA, w.camera_msg(t))
+                self.frames += 1
+
+    def _camera_watched(self) -> bool:
+        info = self.bus.topics().get(topics.CAMERA)
+        return info is not None and bool(info.subscribers)
 
     def _apply_battery(self) -> None:
         """The scenario's initial charge, set once on the firmware model's battery (its
