@@ -7,6 +7,7 @@ actions and services the real nodes serve); they record what the brain asked for
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -153,6 +154,29 @@ def nav(bus: Bus, places: Places) -> FakeNav:
 @pytest.fixture
 def kb(bus: Bus) -> FakeKb:
     return FakeKb(bus).serve()
+
+
+@pytest.fixture(scope="session")
+def kb_service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Any]:
+    """The real knowledge base (SQLite + all-MiniLM-L6-v2) with the shipped corpus, once per run."""
+    from sage_robot.core.config.areas import KbSettings
+    from sage_robot.kb.service import KbService
+
+    service = KbService.from_settings(KbSettings(path=str(tmp_path_factory.mktemp("kb") / "kb.sqlite3")))
+    service.ensure_corpus()
+    yield service
+    service.close()
+
+
+@pytest.fixture
+def real_kb(bus: Bus, kb_service: Any) -> Any:
+    """``/kb/search`` served on the test's bus by the real KB (as KbNode serves it)."""
+
+    async def search(req: SearchRequest) -> SearchResponse:
+        return SearchResponse(tuple(await asyncio.to_thread(kb_service.search, req.query, req.top_k)))
+
+    bus.serve(topics.KB_SEARCH, search)
+    return kb_service
 
 
 @pytest.fixture

@@ -3,8 +3,8 @@
 Each intent (:mod:`sage_robot.brain.intents`) has a handler; handlers act through the
 same tools the model uses (so `sage ask --json` shows the same tool calls) and answer in
 fixed, speakable lines. Knowledge questions are answered from the knowledge base: the
-passage that shares the most words with the question, trimmed to two or three
-sentences around the best one; when nothing shares enough, an honest "I don't know".
+best passage that is really about the question (:mod:`sage_robot.brain.answers`),
+trimmed to two or three sentences; when none is, an honest "I don't know".
 """
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+from sage_robot.brain.answers import Hit, kb_answer
 from sage_robot.brain.base import Brain, Say, Speaker, TurnResult
 from sage_robot.brain.intents import CONFIRM, DECLINE, Intent, classify, prepare
-from sage_robot.brain.matching import content_words
 from sage_robot.brain.phrases import (
     CAPABILITIES,
     DONT_KNOW,
@@ -33,41 +33,8 @@ from sage_robot.brain.tools import ToolCall, ToolRegistry
 from sage_robot.core.places import Place
 
 KB_TOP_K = 3
-KB_MIN_OVERLAP = 0.5  # share of the question's content words a passage must contain
-ANSWER_SENTENCES = 3
-ANSWER_MAX_CHARS = 360
 NEAR_M = 3.0  # closer than this to a place is "at" it
 PLACES_SPOKEN = 6  # places named in a list before "and more"
-GENERIC_WORDS = frozenset({"valpo", "valparaiso", "university", "college", "engin", "tell", "know"})
-
-
-def kb_answer(question: str, passages: list[str]) -> str | None:
-    """Two or three speakable sentences from the passage that best covers the question."""
-    wanted = set(content_words(question)) - GENERIC_WORDS
-    if not wanted:
-        return None
-    best: tuple[float, list[str], int] | None = None
-    for text in passages:
-        sentences = split_sentences(text)
-        if not sentences:
-            continue
-        found = set(content_words(text)) & wanted
-        if len(found) / len(wanted) < KB_MIN_OVERLAP:
-            continue
-        scores = [len(set(content_words(s)) & wanted) for s in sentences]
-        start = max(range(len(sentences)), key=lambda i: scores[i])
-        cover = len(found) / len(wanted)
-        if best is None or cover > best[0]:
-            best = (cover, sentences, start)
-    if best is None:
-        return None
-    _, sentences, start = best
-    out: list[str] = []
-    for s in sentences[start : start + ANSWER_SENTENCES]:
-        if out and sum(len(x) + 1 for x in out) + len(s) > ANSWER_MAX_CHARS:
-            break
-        out.append(s)
-    return " ".join(out)
 
 
 def join_names(names: list[str]) -> str:
@@ -259,8 +226,8 @@ class OfflineBrain(Brain):
         call = await self._tool("kb_search", {"query": text, "top_k": KB_TOP_K})
         if not call.result.ok:
             return f"I can not look that up right now, because {lower_first(call.result.error)}."
-        passages = [str(p["text"]) for p in call.result.data["passages"]]
-        return kb_answer(text, passages) or DONT_KNOW
+        hits = [Hit.from_tool(p) for p in call.result.data["passages"]]
+        return kb_answer(text, hits) or DONT_KNOW
 
     async def _unknown(self, intent: Intent, text: str) -> str:
         return UNKNOWN

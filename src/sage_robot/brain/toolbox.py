@@ -90,7 +90,10 @@ async def kb_search(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
     if not out.ok:
         return ToolResult.fail(out.reason)
     hits = [
-        {"text": p.text[:KB_PASSAGE_CHARS], "title": p.title, "source": p.source, "score": round(p.score, 3)}
+        {
+            "text": p.text[:KB_PASSAGE_CHARS], "title": p.title, "section": p.section, "source": p.source,
+            "score": round(p.score, 3), "similarity": round(p.similarity, 3),
+        }
         for p in out.data
     ]
     return ToolResult(True, {"passages": hits, "count": len(hits)})

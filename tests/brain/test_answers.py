@@ -1,0 +1,86 @@
+"""Answers from the real knowledge base: the shipped question set, and off-topic questions.
+
+The KB always returns its top passages; the offline brain must say the relevant one and
+admit "I don't know" for the rest (``brain/answers.py``).
+"""
+
+from __future__ import annotations
+
+import yaml
+
+from sage_robot.brain.answers import Hit, best_hit, cover, is_relevant, keywords, trim
+from sage_robot.brain.offline import OfflineBrain
+from sage_robot.brain.phrases import DONT_KNOW
+from sage_robot.brain.speech import split_sentences
+from sage_robot.core.paths import package_data
+
+from .conftest import make_tools
+
+ANSWERED_MIN = 0.85  # of the shipped questions that reach the KB, the share answered
+RIGHT_DOC_MIN = 0.75  # of those, the share answered from the document the set names
+# Questions no shipped document answers. The second half was not looked at while the
+# thresholds in brain/answers.py were chosen.
+OFF_TOPIC = [
+    "What is the capital of France?", "Who won the world cup in 2018?", "How tall is Mount Everest?",
+    "What is the stock price of Apple today?", "Can you recommend a good movie?",
+    "What is the weather tomorrow?", "How do I bake sourdough bread?",
+    "Who is the president of the United States?",
+    "What is quantum entanglement?", "Tell me about the history of Rome", "Who wrote Hamlet?",
+    "How do airplanes fly?", "Where is the nearest train station?", "What time is the football game tonight?",
+    "How do I renew my passport?", "What is the speed of light?", "Who painted the Mona Lisa?",
+    "How many calories are in an apple?", "what is the population of Tokyo", "how do volcanoes erupt",
+    "who is the best basketball player", "what is bitcoin",
+]  # fmt: skip
+
+
+def test_keywords_are_stemmed_and_skip_filler() -> None:
+    assert keywords("How do I get something printed in 3D?") == {"print", "3d"}
+    assert keywords("Any student can submit a print") == {"student", "submit", "print"}
+
+
+def test_relevance_uses_similarity_title_and_section() -> None:
+    q = keywords("how do I get something printed in 3D?")
+    passage = Hit("Any student can submit a print: upload the STL file.", "3D Printing Lab",
+                  "How to get something printed", similarity=0.3)  # fmt: skip
+    assert cover(q, passage) == 1.0 and is_relevant(q, passage)
+    assert not is_relevant(q, Hit("Any student can submit a print.", similarity=0.1))  # one word, weak vector
+    assert is_relevant(q, Hit("Nothing in common.", similarity=0.45))  # the vectors alone are sure
+    rare = keywords("help with calculus homework")
+    assert is_relevant(rare, Hit("Tutors help with calculus and physics homework.", similarity=0.0))
+
+
+def test_best_hit_takes_the_first_relevant_in_kb_order() -> None:
+    hits = [Hit("Off topic words.", similarity=0.1), Hit("The cafe sells bagels.", similarity=0.5)]
+    assert best_hit("do they sell bagels", hits) is hits[1]
+    assert best_hit("the and of", hits) is None  # no keywords: nothing to answer
+
+
+def test_trim_is_at_most_three_sentences() -> None:
+    text = "One is here. Two is there. Three is near. Four is far. Five."
+    assert trim(text, "four") == "Four is far. Five."
+    assert trim(text) == "One is here. Two is there. Three is near."
+
+
+async def test_shipped_questions_are_answered_and_off_topic_ones_are_not(bus, settings, real_kb) -> None:
+    brain = OfflineBrain(make_tools(bus, settings, package_data("brain", "places.yaml")))
+    rows = yaml.safe_load(package_data("kb", "questions.yaml").read_text())
+    asked = answered = right = 0
+    for row in rows:
+        brain.reset()
+        result = await brain.respond(row["q"])
+        searches = [c for c in result.tool_calls if c.name == "kb_search"]
+        if not searches:
+            continue  # another intent took it ("where is the nearest toilet" → where_is)
+        asked += 1
+        if result.reply == DONT_KNOW:
+            continue
+        answered += 1
+        passages = searches[0].result.data["passages"]
+        source = next(p["source"] for p in passages if result.sentences[0] in split_sentences(p["text"]))
+        right += source.endswith(row["doc"])
+    assert asked >= 0.8 * len(rows)
+    assert answered / asked >= ANSWERED_MIN, (answered, asked)
+    assert right / answered >= RIGHT_DOC_MIN, (right, answered)
+    for text in OFF_TOPIC:
+        result = await brain.respond(text)
+        assert result.intent == "question" and result.reply == DONT_KNOW, (text, result.reply)
