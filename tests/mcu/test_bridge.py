@@ -259,3 +259,17 @@ async def test_sim_profile_wires_mcu_sim_and_serial_bridge():
     assert report["serial_bridge"]["stats"]["frames"].get("ODOM", 0) > 0
     assert proto.ODOM.name in report["mcu_sim"]["stats"]["frames_sent"]
     assert "mcu_port" not in ctx.resources  # the simulated MCU cleaned up after itself
+
+
+async def test_battery_percentage_does_not_swing_with_the_motor_load(rig: Rig):
+    await rig.run(0.5)
+    await rig.settle()
+    at_rest = rig.battery[-1]
+    rig.command(0.8)
+    await rig.run(6.0)
+    await rig.settle()
+    raw = rig.bridge.stats()["battery_raw_v"]
+    assert raw < at_rest.voltage - 0.3  # the pack really sags under the motors
+    driving = rig.battery[-1]
+    # 6 s of a 30 s average: well inside a watchdog's 3 % hysteresis.
+    assert abs(driving.percentage - at_rest.percentage) < 0.02, (at_rest, driving, raw)

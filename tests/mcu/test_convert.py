@@ -51,3 +51,24 @@ def test_imu_calibrator_restarts_when_the_robot_moves():
     assert cal.bias == pytest.approx((0.01, -0.02, 0.005)) and cal.retries == 1
     imu = cal.correct((0.01, -0.02, 0.505, 0.1, 0.0, 9.8), stamp=2.0)
     assert imu.angular_velocity == pytest.approx((0.0, 0.0, 0.5))
+
+
+def test_voltage_smoother_rides_out_load_sag_but_follows_a_real_change():
+    from sage_robot.hardware.mcu.convert import BATTERY_SMOOTHING_TAU_S, VoltageSmoother
+
+    s = VoltageSmoother()
+    assert s.update(15.8, 0.0) == 15.8  # the first reading is taken as is
+    for k in range(1, 501):  # 10 s of driving at 50 Hz: the pack sags to 15.3 V
+        s.update(15.3, k * 0.02)
+    expected = 15.3 + 0.5 * math.exp(-10.0 / BATTERY_SMOOTHING_TAU_S)
+    assert s.value == pytest.approx(expected, abs=1e-3)  # an EMA on the clock's dt
+    for k in range(501, 501 + 50 * 300):  # five minutes later it has followed
+        s.update(15.3, k * 0.02)
+    assert s.value == pytest.approx(15.3, abs=0.01)
+    batch = VoltageSmoother(10.0)  # samples stamped alike (a late RX thread) add no weight
+    batch.update(16.0, 0.0)
+    assert batch.update(12.0, 0.0) == 16.0 and batch.update(12.0, 10.0) == pytest.approx(
+        12.0 + 4.0 * math.exp(-1.0)
+    )
+    with pytest.raises(ValueError, match="time constant"):
+        VoltageSmoother(-1.0)

@@ -4,7 +4,9 @@
   profile allows it); a standing non-zero command is re-sent at ``mcu.resend_hz`` so the
   MCU's 550 ms watchdog never trips mid-motion; a stop is sent on zero, when the command
   grows older than ``mcu.cmd_timeout_s``, and on shutdown.
-- A dedicated RX thread decodes ODOM -> ``/odom``, BATTERY -> ``/battery_state`` and
+- A dedicated RX thread decodes ODOM -> ``/odom``, BATTERY -> ``/battery_state`` (the
+  voltage averaged over ``BATTERY_SMOOTHING_TAU_S`` on the node's clock, so the motors'
+  load sag does not swing the percentage) and
   (``mcu.imu_enabled``) IMU -> ``/imu/data`` after the start-up bias calibration,
   publishing through ``bus.publish_threadsafe``.
 - The port is ``ctx.resources["mcu_port"]`` when a simulator put one there, else
@@ -34,6 +36,7 @@ from sage_robot.core.node import Node
 from sage_robot.hardware.mcu import protocol as proto
 from sage_robot.hardware.mcu.convert import (
     ImuCalibrator,
+    VoltageSmoother,
     battery_from,
     clamp_command,
     odometry_from,
@@ -69,6 +72,8 @@ class SerialBridgeNode(Node):
         self.counters: Counter[str] = Counter()
         self._rates: dict[str, float] = {}
         self._rate_base: tuple[float, dict[str, int]] = (self.clock.now(), {})
+        self.battery_smoother = VoltageSmoother()
+        self.battery_raw_v: float | None = None
         self.calibrator = ImuCalibrator(self.mcu.imu_calibration_s) if self.mcu.imu_enabled else None
         self._moved_logged_at: float | None = None
         self.bus.declare(topics.ODOM, Odometry)
@@ -211,7 +216,9 @@ class SerialBridgeNode(Node):
         if kind is proto.ODOM:
             self.bus.publish_threadsafe(topics.ODOM, odometry_from(frame.values, now))
         elif kind is proto.BATTERY:
-            msg = battery_from(frame.values[0], self.settings.battery.discharge_curve, now)
+            self.battery_raw_v = frame.values[0]
+            smooth = self.battery_smoother.update(frame.values[0], now)
+            msg = battery_from(smooth, self.settings.battery.discharge_curve, now)
             self.bus.publish_threadsafe(topics.BATTERY, msg)
         elif kind is proto.IMU and self.calibrator is not None:
             self._on_imu(frame.values, now)
@@ -277,5 +284,6 @@ class SerialBridgeNode(Node):
             "errors": dict(st.errors),
             "command": list(self.command),
             "imu_calibrated": bool(self.calibrator and self.calibrator.bias is not None),
+            "battery_raw_v": None if self.battery_raw_v is None else round(self.battery_raw_v, 3),
             **dict(self.counters),
         }
