@@ -34,3 +34,21 @@ def test_malformed_log_is_one_clear_line(tmp_path: Path, capsys: pytest.CaptureF
 def test_bench_needs_a_reference(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "slam", "--log", str(tmp_path / "x.clf")]) == 2
     assert "--relations" in capsys.readouterr().err
+
+
+def test_save_again_from_a_pose_graph(
+    shared_data: Callable[[str], Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    log = shared_data("slam/mit-csail/mit-csail.clf")
+    assert main(["slam", "replay", str(log), "--limit", "20", "--out", str(tmp_path), "--json"]) == 0
+    capsys.readouterr()
+    graph = tmp_path / "mit-csail.graph.npz"
+    assert (
+        main(["slam", "save", "coarse", "--from", str(graph), "--out", str(tmp_path), "--resolution", "0.1"])
+        == 0
+    )
+    from sage_robot.core.mapio import read_map
+
+    assert read_map(tmp_path / "coarse.yaml").resolution == 0.1
+    assert main(["slam", "save", "x", "--from", str(tmp_path / "none.graph.npz")]) == 2
+    assert "pose graph file not found" in capsys.readouterr().err

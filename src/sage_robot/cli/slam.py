@@ -8,6 +8,10 @@
 - ``sage slam replay LOG [--out DIR] [--name NAME] [--limit N]``: run the same SLAM over a
   CARMEN log (FLASER / ROBOTLASER1 / ODOM, optionally gzipped) with a progress bar and write
   map, pose graph and trajectory.
+- ``sage slam save NAME --from OLD.graph.npz [--resolution R]``: write a saved session again
+  under another name (map re-rendered from the pose graph, e.g. at another resolution). A
+  running session is saved by the ``/slam/save`` service or on exit: the bus is in-process,
+  so another ``sage`` process cannot reach it.
 - On the real robot: ``sage up --mode slam`` (the "slam" profile includes the node).
 """
 
@@ -38,6 +42,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     r.add_argument("--resolution", type=float, default=0.05, help="map cell size (m)")
     r.add_argument("--json", action="store_true", help="print a JSON summary")
     r.set_defaults(func=run_replay)
+    v = ssub.add_parser("save", help="write a saved session again as NAME (e.g. another resolution)")
+    v.add_argument("name", help="new map name")
+    v.add_argument("--from", dest="source", required=True, help="a saved NAME.graph.npz or NAME.yaml")
+    v.add_argument("--out", default="maps", help="output directory (default: ./maps)")
+    v.add_argument("--resolution", type=float, default=0.05, help="map cell size (m)")
+    v.set_defaults(func=run_save)
 
 
 def run_mapping(args: argparse.Namespace) -> int:
@@ -64,6 +74,19 @@ def run_mapping(args: argparse.Namespace) -> int:
         return 0
     print("no map saved (no scans were mapped)")
     return 1
+
+
+def run_save(args: argparse.Namespace) -> int:
+    from sage_robot.core.errors import ConfigError
+    from sage_robot.nav.slam.store import build_map, check_name, load_session, save_session
+
+    check_name(args.name)
+    if args.resolution <= 0:
+        raise ConfigError(f"--resolution must be > 0 m, got {args.resolution}")
+    slam = load_session(args.source)
+    paths = save_session(slam, args.out, args.name, build_map(slam, args.resolution))
+    print(f"map: {paths['yaml']}\npose graph: {paths['graph']}")
+    return 0
 
 
 def run_replay(args: argparse.Namespace) -> int:
