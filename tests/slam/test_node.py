@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from sage_robot.app.profiles import PROFILES
 from sage_robot.core import topics
@@ -23,6 +25,7 @@ from sage_robot.nav.slam.node import (
     SLAM_PROGRESS,
     SLAM_SAVE,
     SlamNode,
+    odom_at,
 )
 
 from .synth import corridor_loop, loop_path, simulate
@@ -101,3 +104,11 @@ def test_sim_slam_profile() -> None:
     assert not {"localization", "navigator", "map_server"} & set(names)
     assert set(names) - {"slam"} <= {n for n, _ in PROFILES["sim"]}
     assert "slam" in [n for n, _ in PROFILES["slam"]]
+
+
+def test_odometry_is_interpolated_at_the_scan_time() -> None:
+    history = [(1.0, (0.0, 0.0, 3.0)), (1.1, (0.1, 0.0, -3.0)), (1.2, (0.2, 0.1, -2.9))]
+    x, y, th = odom_at(history, 1.05)
+    assert x == pytest.approx(0.05) and y == 0.0
+    assert abs(th) == pytest.approx(math.pi, abs=1e-9)  # halfway across the ±pi seam
+    assert odom_at(history, 0.5) == history[0][1] and odom_at(history, 2.0) == history[-1][1]

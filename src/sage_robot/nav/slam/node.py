@@ -14,6 +14,9 @@ when set, else ``<state dir>/maps``.
 from __future__ import annotations
 
 import asyncio
+import bisect
+import math
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -26,9 +29,10 @@ from sage_robot.core.paths import state_dir
 from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgress
 from sage_robot.nav.slam.occupancy import OccupancyMapper
-from sage_robot.nav.slam.points import Scan
+from sage_robot.nav.slam.points import Pose, Scan
 from sage_robot.nav.slam.store import save_session
 
+ODOM_HISTORY = 50  # odometry messages kept to interpolate at scan times (1 s at 50 Hz)
 MAP_PERIOD_S = 1.0  # /map publication period when the map changed
 MAP_RESOLUTION_M = 0.05
 SLAM_PROGRESS = "/slam/progress"
@@ -56,7 +60,8 @@ class SlamNode(Node):
         self.scans = 0
         self.bus.declare(topics.MAP, OccupancyGrid, latched=True)
         self.bus.declare(SLAM_PROGRESS, SlamProgress)
-        self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=1)
+        self._odom_history: deque[tuple[float, Pose]] = deque(maxlen=ODOM_HISTORY)
+        self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=ODOM_HISTORY)
         self._scan_sub = self.subscribe(topics.SCAN, LaserScan, maxsize=1)
         self.bus.serve(SLAM_SAVE, self._on_save)
         self.spawn(self._scan_loop(), name="slam.scans")
@@ -77,12 +82,13 @@ class SlamNode(Node):
 
     def _on_odom(self, msg: Odometry) -> None:
         self._odom = msg
+        self._odom_history.append((msg.stamp, msg.pose.as_tuple()))
 
     async def _scan_loop(self) -> None:
         async for msg in self._scan_sub:
             if self._odom is None:
                 continue  # no odometry yet: nothing to predict from
-            odom = self._odom.pose.as_tuple()
+            odom = odom_at(list(self._odom_history), msg.stamp)
             scan = Scan(np.asarray(msg.ranges), msg.angles, msg.range_min, msg.range_max, self.laser)
             async with self._lock:
                 result = await asyncio.to_thread(self._process, msg.stamp, odom, scan)
@@ -149,3 +155,18 @@ class SlamNode(Node):
             "loop_closures": self.slam.loop_closures,
             "score": round(self.slam.last_score, 3),
         }
+
+
+def odom_at(history: list[tuple[float, Pose]], stamp: float) -> Pose:
+    """The odometry pose at ``stamp`` (s), interpolated between the messages around it; the
+    nearest end of ``history`` (sorted by stamp) outside it."""
+    stamps = [t for t, _ in history]
+    k = bisect.bisect_left(stamps, stamp)
+    if k == 0:
+        return history[0][1]
+    if k == len(history):
+        return history[-1][1]
+    (t0, a), (t1, b) = history[k - 1], history[k]
+    f = (stamp - t0) / (t1 - t0) if t1 > t0 else 1.0
+    dth = math.remainder(b[2] - a[2], 2 * math.pi)
+    return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), math.remainder(a[2] + f * dth, 2 * math.pi))
