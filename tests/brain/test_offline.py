@@ -165,3 +165,31 @@ async def test_where_am_i_before_any_pose_estimate(brain, nav) -> None:
         result.reply
         == "I am not sure where we are: the robot does not know where it is yet, no pose estimate."
     )
+
+
+async def test_describe_place_adds_the_kb_passage_about_it(brain, real_kb) -> None:
+    result = await brain.respond("what is the clean room?")
+    assert [c.name for c in result.tool_calls] == ["describe_place", "kb_search"]
+    assert result.sentences[0] == (
+        "Here is what I know about the Clean Room: controlled environment for sensitive fabrication."
+    )
+    assert "dust" in result.reply  # from the clean room's own KB document
+    assert result.sentences[-1] == "Would you like to go there?" and 3 <= len(result.sentences) <= 4
+    assert len(set(result.sentences)) == len(result.sentences)
+    followed = await brain.respond("yes")
+    assert followed.intent == "navigate"
+
+
+async def test_describe_place_without_kb_does_not_repeat_the_description(brain) -> None:
+    result = await brain.respond("what is the clean room?")
+    assert result.reply == (
+        "Here is what I know about the Clean Room: controlled environment for sensitive "
+        "fabrication. Would you like to go there?"
+    )  # the talking point "This is the clean room, a controlled environment ..." says it again
+
+
+async def test_spoken_errors_say_right_now_once(brain) -> None:
+    result = await brain.respond("take me to the 3d printing lab")
+    expected = "Sorry, I can not take you to the 3D Printing Lab: navigation is not running right now."
+    assert result.reply == expected
+    assert (await brain.respond("when does the cafe open")).reply.count("right now") == 1

@@ -82,3 +82,14 @@ def test_sentences_do_not_depend_on_how_the_stream_is_chunked(text: str, cuts: l
     assert got == whole
     for sentence in got:
         assert sentence == speakable(sentence) and "http" not in sentence and "*" not in sentence
+
+
+def test_3d_and_times_stay_whole() -> None:
+    from sage_robot.brain.phrases import place_phrase
+
+    assert place_phrase("3D_PRINTING_LAB") == "the 3D Printing Lab"
+    assert place_phrase("ECE_LAB_2") == "the E C E Lab 2"
+    assert speakable("The 3D printing lab has a 3D scanner.") == "The 3D printing lab has a 3D scanner."
+    assert split_sentences("It opens at 9 a.m. on Fridays. Closes at 3 p.m. today.") == [
+        "It opens at 9 a.m. on Fridays.", "Closes at 3 p.m. today."
+    ]  # fmt: skip

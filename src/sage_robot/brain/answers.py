@@ -35,6 +35,7 @@ COVER_ALONE = 0.6  # share of keywords found that is enough without any similari
 MIN_WORDS_ALONE = 2  # ... when at least this many keywords are found
 ANSWER_SENTENCES = 3
 ANSWER_MAX_CHARS = 360
+REPEAT_SHARE = 0.7  # a sentence whose keywords were this much said already adds nothing
 
 # Words that say nothing about what is asked (besides matching.STOP_WORDS).
 QUESTION_STOP_WORDS = frozenset(
@@ -131,3 +132,27 @@ def kb_answer(question: str, hits: Iterable[Hit | str]) -> str | None:
     """Two or three speakable sentences from the best relevant passage, or None."""
     found = best_hit(question, (h if isinstance(h, Hit) else Hit(h) for h in hits))
     return trim(found.text, question) if found else None
+
+
+def names_place(hit: Hit, names: Iterable[str]) -> bool:
+    """Is ``hit`` from a document about the place (its name or an alias in the title)?
+    ``names`` are lower-case spoken names ("clean room", "cleanroom")."""
+    title = " ".join(_WORD.findall(f"{hit.title} {hit.section}".lower().replace("_", " ")))
+    return any(f" {n} " in f" {title} " for n in names if n)
+
+
+def place_passage(question: str, hits: Iterable[Hit], names: Iterable[str]) -> Hit | None:
+    """The passage that best describes a place: of those from the place's own document the
+    one most similar to ``question`` ("what is X? <its description>"), else the first
+    relevant one."""
+    hits, names = list(hits), list(names)
+    own = [h for h in hits if split_sentences(h.text) and names_place(h, names)]
+    if own:
+        return max(own, key=lambda h: h.similarity)  # max keeps the KB's order among ties
+    return best_hit(question, hits)
+
+
+def repeats(sentence: str, said: str) -> bool:
+    """Does ``sentence`` mostly say again what ``said`` already said?"""
+    words = keywords(sentence)
+    return bool(words) and len(words & keywords(said)) / len(words) >= REPEAT_SHARE

@@ -12,9 +12,10 @@ from __future__ import annotations
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-from sage_robot.brain.answers import Hit, kb_answer
+from sage_robot.brain.answers import Hit, kb_answer, place_passage, repeats, trim
 from sage_robot.brain.base import Brain, Say, Speaker, TurnResult
 from sage_robot.brain.intents import CONFIRM, DECLINE, Intent, classify, prepare
+from sage_robot.brain.matching import clean
 from sage_robot.brain.phrases import (
     CAPABILITIES,
     DONT_KNOW,
@@ -33,6 +34,7 @@ from sage_robot.brain.tools import ToolCall, ToolRegistry
 from sage_robot.core.places import Place
 
 KB_TOP_K = 3
+DESCRIBE_KB_SENTENCES = 2  # sentences from the KB after a place's own description
 NEAR_M = 3.0  # closer than this to a place is "at" it
 PLACES_SPOKEN = 6  # places named in a list before "and more"
 
@@ -138,7 +140,7 @@ class OfflineBrain(Brain):
             return await self._unknown_place(intent.slot)
         call = await self._tool("set_goal", {"location": intent.place.name})
         if not call.result.ok:
-            return f"Sorry, I can not go to {place_phrase(intent.place)} right now: {call.result.error}."
+            return f"Sorry, I can not take you to {place_phrase(intent.place)}: {call.result.error}."
         return f"Sure, follow me to {place_phrase(intent.place)}!"
 
     async def _unknown_place(self, slot: str) -> str:
@@ -197,7 +199,7 @@ class OfflineBrain(Brain):
         args = {"theme": intent.slot} if intent.slot else {}
         call = await self._tool("start_tour", args)
         if not call.result.ok:
-            return f"Sorry, I can not start a tour right now: {call.result.error}."
+            return f"Sorry, I can not start a tour: {call.result.error}."
         stops = call.result.data["stops"]
         return (
             f"Wonderful, let us go! The tour has {len(stops)} stops, "
@@ -212,20 +214,37 @@ class OfflineBrain(Brain):
         return f"I can take you to {join_names(names)}. Where would you like to go?"
 
     async def _describe(self, intent: Intent, text: str) -> str:
-        assert intent.place is not None
-        call = await self._tool("describe_place", {"name": intent.place.name})
-        d = call.result.data
-        desc = d.get("description") or "one of the places on my tour"
-        line = f"Here is what I know about {place_phrase(intent.place)}: {lower_first(desc.rstrip('.'))}."
-        if d.get("talking_points"):
-            line += " " + " ".join(split_sentences(d["talking_points"])[:2])
-        self._offer = intent.place
-        return line + " Would you like to go there?"
+        """The place's description, then one or two sentences about it from the KB (else
+        its talking points), without saying the same thing twice; then an offer to go."""
+        place = intent.place
+        assert place is not None
+        self._offer = place
+        call = await self._tool("describe_place", {"name": place.name})
+        d = call.result.data if call.result.ok else {}
+        desc = str(d.get("description") or place.description or "one of the places on my tour")
+        said = f"Here is what I know about {place_phrase(place)}: {lower_first(desc.rstrip('.'))}."
+        more = await self._about_place(place) or str(d.get("talking_points") or "")
+        for sentence in split_sentences(more)[:DESCRIBE_KB_SENTENCES]:
+            if not repeats(sentence, said):
+                said += " " + sentence
+        return said + " Would you like to go there?"
+
+    async def _about_place(self, place: Place) -> str:
+        """One or two sentences about ``place`` from the knowledge base ('' when none)."""
+        spoken = place.aliases[0] if place.aliases else clean(place.name)
+        query = f"What is the {spoken}? {place.description}".strip()
+        call = await self._tool("kb_search", {"query": query, "top_k": KB_TOP_K})
+        if not call.result.ok:
+            return ""
+        hits = [Hit.from_tool(p) for p in call.result.data["passages"]]
+        names = {clean(n) for n in (*place.spoken_names(), place.name)}
+        found = place_passage(query, hits, names)
+        return trim(found.text, sentences=DESCRIBE_KB_SENTENCES) if found else ""
 
     async def _question(self, intent: Intent, text: str) -> str:
         call = await self._tool("kb_search", {"query": text, "top_k": KB_TOP_K})
         if not call.result.ok:
-            return f"I can not look that up right now, because {lower_first(call.result.error)}."
+            return f"I can not look that up, because {lower_first(call.result.error)}."
         hits = [Hit.from_tool(p) for p in call.result.data["passages"]]
         return kb_answer(text, hits) or DONT_KNOW
 

@@ -7,18 +7,22 @@ benchmark see the same words every run.
 
 from __future__ import annotations
 
+import re
 import zlib
 
 from sage_robot.brain.speech import first_sentences
 from sage_robot.core.places import Place
 
-_WORDS = {"LAB": "Lab", "ENG": "Engineering", "BIO": "Bio", "ECE": "E C E", "3D": "3 D"}
+_HAS_DIGIT = re.compile(r"\d")  # '3D', 'B2': said as written, not capitalized
+_WORDS = {"LAB": "Lab", "ENG": "Engineering", "BIO": "Bio", "ECE": "E C E"}
 
 
 def place_phrase(place: Place | str) -> str:
-    """How to say a place: 'GUELLY_DELLY' → 'the Guelly Delly', 'ECE_LAB_1' → 'the E C E Lab 1'."""
+    """How to say a place: 'GUELLY_DELLY' → 'the Guelly Delly', 'ECE_LAB_1' → 'the E C E Lab 1',
+    '3D_PRINTING_LAB' → 'the 3D Printing Lab' (TTS says "3D"; "3 D" would be read as two words)."""
     name = place.name if isinstance(place, Place) else place
-    words = [_WORDS.get(w, w.capitalize()) for w in name.replace("-", "_").split("_") if w]
+    parts = [w for w in name.replace("-", "_").split("_") if w]
+    words = [_WORDS.get(w, w if _HAS_DIGIT.search(w) else w.capitalize()) for w in parts]
     return "the " + " ".join(words)
 
 

@@ -45,7 +45,7 @@ _SYMBOL_WORDS = {
 
 # A period after these does not end a sentence.
 _ABBREVIATIONS = frozenset(
-    "mr mrs ms dr prof st no vs etc e.g i.e approx dept univ inc jr sr fig".split()  # noqa: SIM905
+    "mr mrs ms dr prof st no vs etc e.g i.e a.m p.m approx dept univ inc jr sr fig".split()  # noqa: SIM905
 )
 _END = re.compile(r"([.!?]+)([\"'’)\]]*)(\s+)")
 
