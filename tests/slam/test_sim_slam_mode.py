@@ -1,0 +1,66 @@
+"""SLAM mode on the real simulator: the world, the firmware model behind a pseudo-terminal, the
+serial bridge and the slam node, driven by the bundled ``teleop_drive`` scenario (standing
+/cmd_vel commands, two walkers) on the simulated clock."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from sage_robot.app.runtime import make_context, run_launcher, specs_for
+from sage_robot.core.config import load_profile
+from sage_robot.core.mapio import read_map
+from sage_robot.nav.slam.node import (
+    AUTOSAVE_RESOURCE,
+    INITIAL_POSE_RESOURCE,
+    OUT_DIR_RESOURCE,
+    SAVED_RESOURCE,
+)
+from sage_robot.sim.node import SCENARIO_RESOURCE, WORLD_RESOURCE
+from sage_robot.sim.raycast import GridRaycaster
+from sage_robot.sim.scenario import bundled_scenarios, load_scenario
+
+NODES = {"sim_world", "mcu_sim", "serial_bridge", "slam"}
+DOCK = (47.3, 57.5, 0.0)  # DOCKING_STATION in the shipped waypoints: the scenario's start
+
+
+async def test_teleop_drive_in_slam_mode(tmp_path: Path) -> None:
+    path = next(p for p in bundled_scenarios() if Path(p).stem == "teleop_drive")
+    scenario = load_scenario(path)
+    overrides = scenario.settings_overrides()
+    overrides.setdefault("sim", {})["speed"] = None  # as fast as the machine allows
+    settings = load_profile(None, overrides)
+    ctx = make_context(settings, simulated=True)
+    ctx.resources[SCENARIO_RESOURCE] = scenario
+    ctx.resources[OUT_DIR_RESOURCE] = str(tmp_path)
+    ctx.resources[AUTOSAVE_RESOURCE] = "teleop"
+    ctx.resources[INITIAL_POSE_RESOURCE] = DOCK  # map frame = the building's frame
+    specs = [s for s in specs_for("sim_slam") if s.name in NODES]
+    assert {s.name for s in specs} == NODES
+    launcher = await run_launcher(ctx, specs, until=scenario.duration_s)
+    assert not [n for n, h in launcher.health.items() if h.restarts], launcher.health
+    world = ctx.resources[WORLD_RESOURCE]
+    truth_end = world.pose
+    assert math.dist(truth_end[:2], DOCK[:2]) > 8.0  # it drove out and down the corridor
+
+    saved = ctx.resources[SAVED_RESOURCE]
+    traj = np.loadtxt(saved["trajectory"])
+    assert len(traj) > 40  # as fast as possible: the node takes the newest scan when busy
+    end = traj[-1, 1:]
+    assert math.dist(end[:2], truth_end[:2]) < 0.3
+    assert abs(math.remainder(end[2] - truth_end[2], 2 * math.pi)) < 0.1
+    grid = read_map(saved["yaml"])
+    rows, cols = np.nonzero(grid.data == 100)
+    xs = grid.origin.x + (cols + 0.5) * grid.resolution
+    ys = grid.origin.y + (rows + 0.5) * grid.resolution
+    truth = GridRaycaster(read_map(Path(world_map_path())))
+    near = truth.clearance(xs, ys) <= 0.15
+    assert len(xs) > 300 and near.mean() > 0.8  # walls where the building has walls
+
+
+def world_map_path() -> str:
+    from sage_robot.core.paths import package_data
+
+    return str(package_data("maps", "campus", "map.yaml"))
