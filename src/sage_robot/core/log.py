@@ -114,17 +114,31 @@ class RecentRecords(logging.Handler):
 RECENT = RecentRecords()
 
 
+_console: logging.Handler | None = None  # the stderr handler configure() attached
+
+
 def configure(level: str = "INFO", fmt: str | None = None) -> None:
-    """Set up the root 'sage' logger once: human on a TTY, JSON otherwise (or SAGE_LOG_FORMAT)."""
-    global _configured
+    """Set up the root 'sage' logger once: human on a TTY, JSON otherwise (or SAGE_LOG_FORMAT).
+
+    ``level`` is what reaches the terminal (the stderr handler's level). The logger itself
+    stays at INFO or lower, so the in-memory records (admin page) keep INFO whatever the
+    terminal shows; a later call only changes the terminal's level.
+    """
+    global _configured, _console
     root = logging.getLogger("sage")
-    root.setLevel(level.upper())
+    wanted = logging.getLevelName(level.upper())
+    if not isinstance(wanted, int):
+        raise ValueError(f"unknown log level {level!r}; use DEBUG, INFO, WARNING or ERROR")
+    root.setLevel(min(wanted, logging.INFO))
     if _configured:
+        if _console is not None:
+            _console.setLevel(wanted)
         return
     _configured = True
     fmt = fmt or os.environ.get("SAGE_LOG_FORMAT") or "human"
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(JsonFormatter() if fmt == "json" else HumanFormatter())
-    root.addHandler(handler)
+    _console = logging.StreamHandler(sys.stderr)
+    _console.setLevel(wanted)
+    _console.setFormatter(JsonFormatter() if fmt == "json" else HumanFormatter())
+    root.addHandler(_console)
     root.addHandler(RECENT)
     root.propagate = False
