@@ -15,6 +15,7 @@ from sage_robot.brain.scripted import ScriptedServer, call, say
 from sage_robot.cli.main import main
 
 CHAT_TIMEOUT_S = 60.0
+SIM_TIMEOUT_S = 120.0  # a `--sim` run: start the simulated robot, one turn, stop
 
 
 def ask(capsys, *argv: str) -> tuple[int, str, str]:
@@ -88,3 +89,34 @@ def test_chat_in_a_terminal() -> None:
     lines = [ln for ln in proc.stdout.splitlines() if "sage> " in ln]
     assert lines[0].endswith("Hello! I am SAGE Jarvis, your tour guide.") or "Hi there" in lines[0]
     assert any("Clean Room" in ln for ln in lines)
+
+
+def sage(*argv: str, stdin: str = "") -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "sage_robot.cli.main", *argv],
+        input=stdin, capture_output=True, text=True, timeout=SIM_TIMEOUT_S,
+    )  # fmt: skip
+
+
+def test_ask_sim_starts_only_the_robot_navigation_and_kb() -> None:
+    proc = sage("ask", "take me to the cafe", "--sim", "--json")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    data = json.loads(proc.stdout)
+    assert data["reply"] == "Sure, follow me to the Guelly Delly!"
+    goal = data["tool_calls"][0]
+    assert goal["name"] == "set_goal" and goal["ok"] and goal["result"]["status"] == "navigating"
+    for node in ("sim_world", "mcu_sim", "serial_bridge", "map_server", "localization", "navigator", "kb"):
+        assert f"node running  node={node}" in proc.stderr, node
+    for node in ("voice", "web", "foxglove"):
+        assert f"node={node}" not in proc.stderr, node
+
+
+def test_chat_sim_log_level_warning_hides_info(tmp_path) -> None:
+    """The web node keeps INFO records for its admin page; the terminal still shows WARNING+."""
+    profile = tmp_path / "p.yaml"
+    profile.write_text("web:\n  host: 127.0.0.1\n  port: 0\n")
+    proc = sage("--profile", str(profile), "--log-level", "WARNING", "chat", "--sim", "--with", "web",
+                stdin="hello\nquit\n")  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "sage> Hello! I am SAGE Jarvis" in proc.stdout
+    assert not [ln for ln in proc.stderr.splitlines() if " INFO " in ln or " DEBUG " in ln], proc.stderr

@@ -1,9 +1,10 @@
 """`sage chat` (a conversation in the terminal) and `sage ask "text" --json` (one turn).
 
 Both use the configured brain: the LLM agent when ``llm.base_url`` is set, else the
-offline brain. ``--sim`` starts the whole simulated robot in this process first, so
-"take me to the café" really drives; without it, tools that need navigation say it is
-not running. ``--with NODE`` adds single nodes (e.g. ``kb`` for knowledge questions).
+offline brain. ``--sim`` starts the simulated robot, navigation and the knowledge base
+(:data:`SIM_NODES`) in this process first, so "take me to the café" really drives;
+without it, tools that need navigation say it is not running. ``--with NODE`` adds single
+nodes (e.g. ``kb`` for knowledge questions).
 """
 
 from __future__ import annotations
@@ -24,6 +25,11 @@ from sage_robot.core.errors import ConfigError
 from sage_robot.core.node import NodeContext
 
 ASK_TIMEOUT_S = 120.0  # longest a single `sage ask` turn may take
+# What `--sim` starts: the simulated robot, navigation and the knowledge base; not the
+# voice (its models load for seconds), the web server (:8000) or Foxglove (:8765).
+SIM_NODES = (
+    "sim_world", "mcu_sim", "serial_bridge", "map_server", "localization", "navigator", "kb", "brain",
+)  # fmt: skip
 PROMPT = "you> "
 
 
@@ -54,7 +60,7 @@ def _settings(args: argparse.Namespace) -> Any:
 
 def _node_names(args: argparse.Namespace, with_brain: bool) -> tuple[list[str], bool]:
     """Nodes to start and whether the clock is simulated."""
-    names = [n for n, _ in PROFILES["sim"]] if args.sim else []
+    names = [n for n, _ in PROFILES["sim"] if n in SIM_NODES] if args.sim else []
     names += [n for n in args.nodes if n not in names]
     if with_brain and "brain" not in names:
         names.append("brain")
