@@ -310,4 +310,6 @@ async def test_goal_and_heard_events_without_navigation() -> None:
     await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=1.0)
     (goal,) = ctx.resources[SUMMARY_RESOURCE]["goals"]
     assert goal["goal"] == "the cafe" and goal["status"] == "no navigation node"
-    assert [t.data for t in heard] == ["hello"]
+    assert [t.data for t in heard] == ["hello"]  # the notification, as the voice pipeline's
+    (talk,) = ctx.resources[SUMMARY_RESOURCE]["conversations"]
+    assert talk["heard"] == "hello" and talk["status"] == "no brain"

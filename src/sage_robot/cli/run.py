@@ -135,7 +135,10 @@ def run_sim(args: argparse.Namespace) -> int:
         ws = world.summary()
         ws.pop("sim_time_s", None)
         summary.update(ws)
-    summary["goals"] = ctx.resources.get(SUMMARY_RESOURCE, {}).get("goals", [])
+    results = ctx.resources.get(SUMMARY_RESOURCE, {})
+    summary["goals"] = results.get("goals", [])
+    summary["conversations"] = results.get("conversations", [])
+    summary["arrivals"] = results.get("arrivals", [])
     _print_summary(summary, args.json)
     return 0 if world is not None else 1
 
@@ -156,6 +159,11 @@ def _print_summary(summary: dict[str, Any], as_json: bool) -> None:
         )
     for goal in summary["goals"]:
         print(f"goal {goal['goal']}: {goal.get('status', 'running')} {goal.get('message', '')}".rstrip())
+    for talk in summary.get("conversations", []):
+        replies = " ".join(talk.get("replies", []))
+        print(f"heard {talk['heard']!r}: {talk.get('status', 'running')} {replies!r}")
+    for arrival in summary.get("arrivals", []):
+        print(f"arrived at {arrival['place']} at {arrival['at_s']:.1f} s")
     print(f"nodes restarted: {', '.join(summary['nodes_restarted']) or 'none'}")
 
 

@@ -69,6 +69,7 @@ class WorldNode(Node):
         self._cmd, self._cmd_t = Twist(), -math.inf
         if self.direct_drive:
             self.subscribe(topics.CMD_VEL, Twist, self._on_cmd)
+        self.subscribe(topics.EVENTS, Event, self._on_event, maxsize=1000)
         self._events = list(self.scenario.events) if self.scenario else []
         self._battery_pending = self.scenario.battery if self.scenario and not self.direct_drive else None
         self._standing: Twist | None = None
@@ -210,8 +211,8 @@ class WorldNode(Node):
             v, w = ev.value
             self._standing = Twist(v, w)
             self._next["resend"] = now
-        elif ev.action == "heard":
-            self.bus.publish(topics.HEARD, Text(ev.value))
+        elif ev.action == "heard":  # a visitor's words, already transcribed
+            self.spawn(self._visitor_heard(ev.value), name="sim_world.heard")
         elif ev.action == "say":  # the voice node speaks it into the simulated microphone
             self.bus.publish(getattr(topics, "SIM_VISITOR_SAY", VISITOR_SAY), Text(ev.value))
         elif ev.action == "goal":
@@ -223,6 +224,48 @@ class WorldNode(Node):
         self.bus.publish(
             topics.EVENTS, Event(now, EVENT_SOURCE, "scenario_event", f"{ev.action}: {ev.value}")
         )
+
+    async def _visitor_heard(self, words: str) -> None:
+        """A visitor's transcribed words, handled as the voice pipeline handles a turn after
+        STT: ``/sage/heard`` as a notification, the words as a ``converse`` goal to the
+        brain, each streamed sentence on ``/sage/say`` (the voice node speaks it when it
+        runs). The voice area's simulated microphone takes audio only (no text API in
+        ``ctx.resources``; spoken words are the ``say`` action), so the brain is asked
+        directly. What came of it goes into the summary's ``conversations``."""
+        record: dict[str, Any] = {"heard": words, "sent_s": round(self.clock.now(), 2)}
+        self.summary.setdefault("conversations", []).append(record)
+        self.bus.publish(topics.HEARD, Text(words))
+        if not self.bus.actions.has(topics.CONVERSE):
+            record["status"] = "no brain"
+            self.log.warning("scenario words not answered: nothing serves converse", heard=words)
+            return
+        replies: list[str] = record.setdefault("replies", [])
+        try:
+            handle = await self.bus.actions.send_goal(topics.CONVERSE, Text(words))
+            async for fb in handle.feedback():
+                if isinstance(fb, Text) and fb.data:
+                    self._say(fb.data, replies)
+            result = await handle.result()
+        except SageError as exc:  # the brain went away in between: a result, not a crash
+            record.update(status="error", message=str(exc))
+            return
+        if not replies and result.ok and isinstance(result.value, Text) and result.value.data:
+            self._say(result.value.data, replies)
+        record.update(status=result.status.value, done_s=round(self.clock.now(), 2))
+        if result.message:
+            record["message"] = result.message
+
+    def _say(self, sentence: str, replies: list[str]) -> None:
+        replies.append(sentence)
+        self.bus.publish(topics.SAY, Text(sentence))
+
+    def _on_event(self, ev: Event) -> None:
+        """Arrivals (the navigator's events) go into the summary, whoever sent the goal."""
+        if ev.kind == "arrived":
+            place = ev.data.get("place", "")
+            self.summary.setdefault("arrivals", []).append(
+                {"place": place, "at_s": round(ev.stamp, 2), "message": ev.message}
+            )
 
     async def _send_goal(self, place: str) -> None:
         from sage_robot.core.msgs.nav import NavigateGoal

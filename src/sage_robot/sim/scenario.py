@@ -19,7 +19,7 @@
     events:                   # at (s) and exactly one action
       - {at: 1.0, cmd_vel: [0.3, 0.0]}   # a standing /cmd_vel (v m/s, w rad/s), re-sent at 20 Hz
       - {at: 5.0, goal: GUELLY_DELLY}    # a navigate_to goal (needs the navigation node)
-      - {at: 8.0, heard: "take me to the cafe"}   # a visitor's words on /sage/heard
+      - {at: 8.0, heard: "take me to the cafe"}   # transcribed words: a converse goal to the brain
       - {at: 9.0, say: "hey jarvis, where is the cafe"}   # spoken into the sim microphone
       - {at: 60.0, stop: true}
 """
