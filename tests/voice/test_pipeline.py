@@ -125,6 +125,7 @@ async def test_full_turn_with_fake_brain(voice_settings, models, say16k):
     spoken_s = sum(len(c.pcm) // 2 / c.sample_rate for c in room.audio)
     assert spoken_s == pytest.approx(room.speaker.seconds_played, rel=1e-6)
     assert room.audio[-1].final
+    assert room.pipeline.early_transcripts == 1  # Whisper started on the pause
     lat = room.latency[0]
     assert 0 < lat.end_of_speech <= lat.stt_done <= lat.first_token <= lat.first_audio
     assert not math.isnan(lat.reply_delay_s)

@@ -92,6 +92,37 @@ def test_no_wake_on_neutral_sentences_and_noise(models, say16k):
     assert max(det.max_scores.values()) < 0.6
 
 
+class ScriptedEngine:
+    """Plays back a list of scores, one per frame (the detector's logic alone)."""
+
+    names = ("w",)
+
+    def __init__(self, scores: list[float]) -> None:
+        self.scores = list(scores)
+
+    def score(self, frame: np.ndarray) -> dict[str, float]:
+        return {"w": self.scores.pop(0) if self.scores else 0.0}
+
+    def reset(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize(
+    ("scores", "patience", "frames"),
+    [
+        ([0, 0.9, 0, 0, 0], 2, []),  # a one-frame spike
+        ([0, 0.9, 0, 0, 0], 1, [2]),
+        ([0, 0.7, 0.8, 0.9, 0.9, 0], 2, [3]),  # reported when the run reaches 2 frames
+        ([0.9] * 3 + [0] * 10 + [0.9] * 3, 2, [2]),  # 13 frames apart < 2 s refractory
+        ([0.9] * 3 + [0] * 30 + [0.9] * 3, 2, [2, 35]),  # 2.6 s apart: two phrases
+    ],
+)
+def test_threshold_patience_refractory(scores, patience, frames):
+    det = WakeDetector(ScriptedEngine(scores), threshold=0.6, refractory_s=2.0, patience=patience)
+    found = det.feed(np.zeros(len(scores) * FRAME_SAMPLES, np.int16))
+    assert [round(d.time_s / 0.08) for d in found] == frames
+
+
 def test_custom_onnx_model_loads_by_path(tmp_path, say16k):
     """A custom model (the seed's "hey sage") is any openWakeWord .onnx file given by path."""
     custom = tmp_path / "hey_sage.onnx"

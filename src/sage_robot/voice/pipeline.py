@@ -93,6 +93,7 @@ class VoicePipeline:
         self.detections: list[Detection] = []
         self.barge_ins = 0
         self.self_echoes_ignored = 0
+        self.early_transcripts = 0  # turns whose transcript was started on the pause
         self.latencies: list[TurnLatency] = []
         self._times: TurnTimes | None = None
         self._turn_task: asyncio.Task[None] | None = None
@@ -217,6 +218,7 @@ class VoicePipeline:
         early = None
         if self._early is not None and self._early[0] == utt.speech_s and utt.reason is EndReason.SILENCE:
             early = self._early[1]
+            self.early_transcripts += 1
         self._early = None
         self._turn_task = asyncio.get_running_loop().create_task(
             self._turn(utt, self._times, early), name="voice.turn"
@@ -336,4 +338,5 @@ class VoicePipeline:
     def stats(self) -> dict[str, Any]:
         return {"state": self.state.value, "turns": self.turns, "barge_ins": self.barge_ins,
                 "wakes": len(self.detections), "self_echoes_ignored": self.self_echoes_ignored,
+                "early_transcripts": self.early_transcripts,
                 **self.mouth.stats()}  # fmt: skip
