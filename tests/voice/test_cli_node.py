@@ -94,3 +94,16 @@ async def test_voice_node_in_simulation(models, monkeypatch, tmp_path):
     assert any(u.error_msg == "brain not running" for u in ui)
     assert Phase.SPEAKING in {u.phase for u in ui}
     assert node.stats()["turns"] == 1
+
+
+def test_listen_without_a_microphone_is_one_clear_line(capsys):
+    sd = pytest.importorskip("sounddevice")
+    try:
+        has_input = any(d["max_input_channels"] > 0 for d in sd.query_devices())
+    except Exception:
+        has_input = False
+    if has_input:
+        pytest.skip("this machine has a microphone; the error path needs none")
+    assert main(["voice", "listen", "--seconds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "microphone" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
