@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import sage_robot.core.msgs as msgs
-from sage_robot.core.msgs import REGISTRY, from_dict, to_dict
+from sage_robot.core.msgs import REGISTRY, from_dict, nav, to_dict
 
 EXAMPLES = [
     msgs.Twist(0.5, -0.2),
@@ -28,6 +28,17 @@ EXAMPLES = [
     msgs.DiagnosticArray(10.0, (msgs.DiagnosticStatus("a", msgs.Level.OK, "fine"),)),
     msgs.Text("hello"),
     msgs.Event(11.0, "nav", "arrived", "at the cafe", {"place": "GUELLY_DELLY"}),
+    nav.NavigateGoal(place="the cafe"),
+    nav.NavigateGoal(pose=msgs.Pose2D(1, 2, 3)),
+    nav.NavigateFeedback(nav.NavState.WAITING_FOR_PEOPLE, "GUELLY_DELLY", 12.5, 30.0),
+    nav.NavigateResult(False, "CLEAN_ROOM", "the corridor to the clean room is blocked", 3.5, 20.0),
+    nav.TourGoal(("GUELLY_DELLY", "CLEAN_ROOM"), 15.0, 1),
+    nav.TourFeedback(1, "CLEAN_ROOM", nav.NavState.DRIVING),
+    nav.TourResult(("GUELLY_DELLY",), False, "canceled"),
+    nav.PlaceInfo("CLEAN_ROOM", msgs.Pose2D(5, 6, 0), "controlled environment", ("the clean room",)),
+    nav.PlaceList((nav.PlaceInfo("A", msgs.Pose2D()),)),
+    nav.WhereAmI(msgs.Pose2D(1, 1, 0), "HESSE_CENTER", 2.5, True),
+    nav.LocalizationHealth(3.0, 0.93, False, 1200),
 ]
 
 
@@ -39,7 +50,8 @@ def test_round_trip_through_json(msg):
 
 def test_every_core_message_has_an_example():
     covered = {type(m).__name__ for m in EXAMPLES}
-    core = {n for n, c in REGISTRY.items() if c.__module__ == "sage_robot.core.msgs.std"}
+    mine = ("sage_robot.core.msgs.std", "sage_robot.core.msgs.nav")
+    core = {n for n, c in REGISTRY.items() if c.__module__ in mine}
     assert core <= covered, f"add round-trip examples for {sorted(core - covered)}"
 
 
