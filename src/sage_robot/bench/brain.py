@@ -5,6 +5,11 @@ developing) and ``phrasings_heldout.yaml`` (never looked at while tuning), again
 seed's places in ``data/brain/places.yaml``. An utterance counts as right when both the
 intent and the place (for navigation and place questions) are right.
 
+KB answers: the offline brain with the real knowledge base (SQLite, shipped corpus) on the
+KB's question set (``data/kb/questions.yaml``): how many reach the KB, how many it
+answers, and how many of those from the document the set names; and how many questions
+of ``data/brain/off_topic.yaml`` it wrongly answers instead of "I do not know".
+
 Latency: the real ``openai`` client against the scripted OpenAI-compatible server on
 loopback; each turn streams a reply in small pieces with ``--token-delay-ms`` between
 them (a model's token rate), and the time from sending the turn to the first sentence
@@ -57,6 +62,66 @@ def accuracy(which: str) -> dict[str, Any]:
             k: f"{per_intent_right[k]}/{n}" for k, n in per_intent.items() if per_intent_right[k] < n
         },
     }
+
+
+async def _kb_answers() -> dict[str, Any]:
+    import tempfile
+
+    import yaml
+
+    from sage_robot.brain.offline import OfflineBrain
+    from sage_robot.brain.phrases import DONT_KNOW
+    from sage_robot.brain.robot import RobotLink
+    from sage_robot.brain.speech import split_sentences
+    from sage_robot.brain.tools import ToolContext, ToolRegistry
+    from sage_robot.core import topics
+    from sage_robot.core.bus import Bus
+    from sage_robot.core.config import Settings
+    from sage_robot.core.config.areas import KbSettings
+    from sage_robot.core.msgs.kb import SearchRequest, SearchResponse
+    from sage_robot.core.paths import package_data
+    from sage_robot.kb.service import KbService
+
+    with tempfile.TemporaryDirectory() as tmp:
+        service = KbService.from_settings(KbSettings(path=f"{tmp}/kb.sqlite3"))
+        try:
+            service.ensure_corpus()
+            bus = Bus()
+
+            async def search(req: SearchRequest) -> SearchResponse:
+                return SearchResponse(tuple(await asyncio.to_thread(service.search, req.query, req.top_k)))
+
+            bus.serve(topics.KB_SEARCH, search)
+            robot = RobotLink(bus, package_data("brain", "places.yaml"))
+            brain = OfflineBrain(ToolRegistry(ToolContext(robot, Settings())))
+            out: dict[str, Any] = {}
+            rows = yaml.safe_load(package_data("kb", "questions.yaml").read_text())
+            for part, held in (("dev", False), ("heldout", True)):
+                c: Counter[str] = Counter()
+                for row in (r for r in rows if bool(r.get("heldout")) == held):
+                    brain.reset()
+                    result = await brain.respond(row["q"])
+                    c["questions"] += 1
+                    searches = [t for t in result.tool_calls if t.name == "kb_search"]
+                    if not searches:
+                        continue
+                    c["reach_kb"] += 1
+                    if result.reply == DONT_KNOW:
+                        continue
+                    c["answered"] += 1
+                    passages = searches[0].result.data["passages"]
+                    first = result.sentences[0]
+                    sources = [p["source"] for p in passages if first in split_sentences(p["text"])]
+                    c["right_document"] += bool(sources) and sources[0].endswith(row["doc"])
+                out[f"questions_{part}"] = dict(c)
+            off = yaml.safe_load(package_data("brain", "off_topic.yaml").read_text())
+            for part in ("development", "heldout"):
+                wrong = [q for q in off[part] if (await brain.respond(q)).reply != DONT_KNOW]
+                out[f"off_topic_{part}"] = {"questions": len(off[part]), "answered_wrongly": len(wrong)}
+            await robot.close()
+            return out
+        finally:
+            service.close()
 
 
 async def _latency(turns: int, delay_s: float) -> dict[str, Any]:
@@ -118,6 +183,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "bench": "brain",
         "offline_dev": accuracy("dev"),
         "offline_heldout": accuracy("heldout"),
+        "offline_kb_answers": asyncio.run(_kb_answers()),
         "llm_latency": {
             "turns": args.turns,
             "token_delay_ms": args.token_delay_ms,

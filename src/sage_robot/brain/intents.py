@@ -184,6 +184,10 @@ QUESTION = re.compile(
     r"^(what|when|where|who|whom|whose|why|which|how|is|are|was|were|do|does|did|can|could|"
     r"will|would|should|tell me|explain|i wonder)\b"
 )
+# A question after a statement: "I need help with calculus, where can I go?"
+QUESTION_INSIDE = re.compile(
+    r"\b(what|when|where|who|which|why|how) (can|could|do|does|did|is|are|should|would|will|much|many|long)\b"
+)
 # Filler that may follow a greeting without making it anything else.
 _GREETING_TAIL = re.compile(r"^(there|everyone|friend|buddy|how are you|how is it going)?\s*$")
 
@@ -248,7 +252,7 @@ def _classify(t: str, places: Places) -> Intent:
         return Intent("small_talk")
     if GOODBYE.search(t):
         return Intent("goodbye")
-    if QUESTION.search(t) and len(t.split()) >= 2:
+    if (QUESTION.search(t) or QUESTION_INSIDE.search(t)) and len(t.split()) >= 2:
         return Intent("question", slot=t)
     return Intent("unknown")
 
