@@ -93,3 +93,27 @@ def test_pty_unplug_removes_the_link_and_replug_restores_it():
     finally:
         pty.close()
     assert not os.path.exists(os.path.dirname(pty.port_name))
+
+
+def test_pty_writes_once_per_odom_period_and_loses_no_frame():
+    """The pty gets one write per 20 ms (ODOM + BATTERY + IMU frames), not one per 10 ms
+    step: each write wakes the bridge's RX thread (a GIL hand-over on the sim's hot path)."""
+    from sage_robot.hardware.mcu import protocol as proto
+
+    fw = FirmwareModel()
+    pty = PtyMcu(fw)
+    try:
+        port = open_port(pty.port_name, 115200)
+        for k in range(1, 101):  # 1 s of 10 ms steps
+            pty.pump(k * 0.01)
+        assert pty.writes == fw.frames_sent["ODOM"] == 50
+        decoder = proto.Decoder()
+        frames: list[proto.Frame] = []
+        deadline = time.monotonic() + 2.0
+        while sum(fw.frames_sent.values()) - len(frames) > 1 and time.monotonic() < deadline:
+            frames += decoder.feed(port.read(port.in_waiting or 1))
+        counts = {k: sum(f.kind.name == k for f in frames) for k in ("ODOM", "BATTERY", "IMU")}
+        assert counts == {"ODOM": 50, "BATTERY": 50, "IMU": 100}  # the last IMU waits <= 10 ms
+        port.close()
+    finally:
+        pty.close()
