@@ -193,3 +193,9 @@ async def test_spoken_errors_say_right_now_once(brain) -> None:
     expected = "Sorry, I can not take you to the 3D Printing Lab: navigation is not running right now."
     assert result.reply == expected
     assert (await brain.respond("when does the cafe open")).reply.count("right now") == 1
+
+
+def test_a_statement_then_a_question_is_a_question() -> None:
+    got = classify("I need help with calculus homework, where can I go?", PLACES)
+    assert got.name == "question"
+    assert classify("I am hungry, where can I get breakfast?", PLACES).place_name == "GUELLY_DELLY"
