@@ -10,8 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from sage_robot.app.runtime import make_context, run_launcher, specs_for
+from sage_robot.core import topics
 from sage_robot.core.config import load_profile
 from sage_robot.core.mapio import read_map
+from sage_robot.core.msgs import Odometry
 from sage_robot.nav.slam.node import (
     AUTOSAVE_RESOURCE,
     INITIAL_POSE_RESOURCE,
@@ -39,6 +41,10 @@ async def test_teleop_drive_in_slam_mode(tmp_path: Path) -> None:
     ctx.resources[INITIAL_POSE_RESOURCE] = DOCK  # map frame = the building's frame
     specs = [s for s in specs_for("sim_slam") if s.name in NODES]
     assert {s.name for s in specs} == NODES
+    truth: list[tuple[float, float, float, float]] = []  # stamp, x, y, theta in the map frame
+    ctx.bus.subscribe(
+        topics.SIM_TRUTH, Odometry, lambda m: truth.append((m.stamp, *m.pose.as_tuple())), maxsize=100_000
+    )
     launcher = await run_launcher(ctx, specs, until=scenario.duration_s)
     assert not [n for n, h in launcher.health.items() if h.restarts], launcher.health
     world = ctx.resources[WORLD_RESOURCE]
@@ -48,9 +54,15 @@ async def test_teleop_drive_in_slam_mode(tmp_path: Path) -> None:
     saved = ctx.resources[SAVED_RESOURCE]
     traj = np.loadtxt(saved["trajectory"])
     assert len(traj) > 40  # as fast as possible: the node takes the newest scan when busy
-    end = traj[-1, 1:]
-    assert math.dist(end[:2], truth_end[:2]) < 0.3
-    assert abs(math.remainder(end[2] - truth_end[2], 2 * math.pi)) < 0.1
+    # Each mapped scan's pose against the true pose at its stamp.
+    true = np.array(truth)
+    k = np.clip(np.searchsorted(true[:, 0], traj[:, 0]), 0, len(true) - 1)
+    assert np.abs(true[k, 0] - traj[:, 0]).max() < 0.05
+    err = np.hypot(traj[:, 1] - true[k, 1], traj[:, 2] - true[k, 2])
+    # Down a bare corridor, with scans dropped while the node is busy, the pose follows the
+    # odometry along the corridor's axis: tenths of a metre, not centimetres (docs/benchmarks.md).
+    assert err.mean() < 0.25 and err.max() < 0.5, (err.mean(), err.max())
+    assert np.abs(np.remainder(traj[:, 3] - true[k, 3] + np.pi, 2 * np.pi) - np.pi).max() < 0.1
     grid = read_map(saved["yaml"])
     rows, cols = np.nonzero(grid.data == 100)
     xs = grid.origin.x + (cols + 0.5) * grid.resolution

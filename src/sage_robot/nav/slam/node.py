@@ -131,7 +131,8 @@ class SlamNode(Node):
         if not self._map_dirty:
             return
         self._map_dirty = False
-        grid = await asyncio.to_thread(self.mapper.to_grid, self.clock.now())
+        async with self._lock:  # the scan thread updates the grid in place
+            grid = await asyncio.to_thread(self.mapper.to_grid, self.clock.now())
         self.bus.publish(topics.MAP, grid)
 
     async def _on_save(self, req: SaveMapRequest) -> SaveMapReply:
