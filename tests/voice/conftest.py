@@ -37,7 +37,7 @@ def say16k(models):
     """Text → the robot's (deterministic) voice at 16 kHz int16, cached per text."""
 
     @functools.cache
-    def render(text: str, length_scale: float = 1.0) -> np.ndarray:
+    def render(text: str) -> np.ndarray:
         speech = models.speech
         pcm = speech.synthesize(text)
         return resample(pcm, speech.sample_rate, SAMPLE_RATE)
