@@ -1,4 +1,5 @@
-"""Global planner speed: the longest route between places, and 100 random pairs.
+"""Global planner speed: the longest route between places, and 100 random pairs; and the
+controller's step time along that route.
 
 Plans on the inflated static costmap exactly as the navigator does (coarse grid on large
 maps, then smoothing). Times are wall-clock per plan, in ms.
@@ -14,6 +15,7 @@ from typing import Any
 import numpy as np
 
 LONGEST_REPEATS = 20  # times the longest route is planned
+CONTROLLER_STEPS = 400  # controller steps timed along the longest route (20 s at 20 Hz)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -45,6 +47,33 @@ def drivable_cells(cm: Any, places: list[Any]) -> np.ndarray:
     else:
         region = int(np.argmax(np.bincount(labels.ravel())[1:])) + 1
     return np.argwhere(labels == region)
+
+
+def _controller(cm: Any, route: Any, settings: Any) -> dict[str, float]:
+    """Regulated Pure Pursuit steps along a route with a 6 m local costmap, as the navigator
+    runs them (the local costmap is rebuilt per scan, not per step, so it is not timed)."""
+    import math
+
+    from sage_robot.nav.controller import ControllerParams, PurePursuit
+
+    nav, robot = settings.nav, settings.robot
+    params = ControllerParams(robot.max_linear_mps, robot.max_angular_radps, nav.lookahead_m)
+    ctl = PurePursuit(route.points, params, None)
+    pose = (float(route.points[0, 0]), float(route.points[0, 1]), 0.0)
+    local = cm.window(pose[0], pose[1], nav.local_costmap_m)
+    times = []
+    dt = 1.0 / nav.controller_hz
+    for k in range(CONTROLLER_STEPS):
+        if k % 2 == 0:
+            local = cm.window(pose[0], pose[1], nav.local_costmap_m)
+        t = time.perf_counter()
+        cmd = ctl.step(pose, local)
+        times.append(time.perf_counter() - t)
+        if cmd.arrived:
+            break
+        x, y, th = pose
+        pose = (x + cmd.v * dt * math.cos(th), y + cmd.v * dt * math.sin(th), th + cmd.w * dt)
+    return {"steps": len(times), **_ms(times)}
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -86,6 +115,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                 times.append(time.perf_counter() - t)
             out["longest_route"] = {"from": a.name, "to": b.name, "length_m": round(best_len, 2),
                                     **_ms(times)}
+            out["controller_step"] = _controller(cm, plan(cm, (a.pose.x, a.pose.y), (b.pose.x, b.pose.y)),
+                                                 settings)
     cells = drivable_cells(cm, places)
     rng = np.random.default_rng(args.seed)
     times, lengths, failed = [], [], 0

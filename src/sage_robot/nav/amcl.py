@@ -125,9 +125,12 @@ def beam_log_likelihood(field: LikelihoodField, poses: np.ndarray, sensor: tuple
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     ox = poses[:, 0] + c * sx - s * sy
     oy = poses[:, 1] + s * sx + c * sy
-    a = poses[:, 2:3] + st + angles[None, :]
-    ex = ox[:, None] + ranges[None, :] * np.cos(a)
-    ey = oy[:, None] + ranges[None, :] * np.sin(a)
+    # cos/sin of (theta_i + st + alpha_j) by the angle-sum rule: outer products, no trig per endpoint
+    ct, stt = np.cos(poses[:, 2] + st).astype(np.float32), np.sin(poses[:, 2] + st).astype(np.float32)
+    bx = (ranges * np.cos(angles)).astype(np.float32)  # beam endpoints in the sensor frame
+    by = (ranges * np.sin(angles)).astype(np.float32)
+    ex = ox.astype(np.float32)[:, None] + np.outer(ct, bx) - np.outer(stt, by)
+    ey = oy.astype(np.float32)[:, None] + np.outer(stt, bx) + np.outer(ct, by)
     table = field.log_p_table(range_max)
     return table[field.flat_index(ex, ey)].sum(axis=1, dtype=np.float64)
 
