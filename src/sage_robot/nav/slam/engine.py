@@ -33,6 +33,7 @@ from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, PoseG
 
 MIN_SCAN_POINTS = 20  # a scan with fewer hits is dead-reckoned
 DOUBTFUL_INLIERS = 0.6  # a match this poor makes the tracker try other motion guesses
+SEARCH_PRIOR_SCALE = 2.0  # the correlative search's prior is this much wider than ICP's
 GLITCH_MARGIN = 0.05  # another guess must match this much better (inlier fraction) to win
 
 
@@ -176,10 +177,15 @@ class Slam:
         cfg = self.config
         if self._local is None or len(q) < MIN_SCAN_POINTS:
             return None
-        init, _ = self._local.search(
-            q, predicted, cfg.search_xy_m, cfg.search_theta_rad, cfg.search_theta_step_rad
-        )
         sxy = cfg.prior_sigma_xy_m + cfg.prior_sigma_xy_fraction * self._step_dist
+        init, _ = self._local.search(
+            q,
+            predicted,
+            cfg.search_xy_m,
+            cfg.search_theta_rad,
+            cfg.search_theta_step_rad,
+            prior_sigma=(SEARCH_PRIOR_SCALE * sxy, SEARCH_PRIOR_SCALE * cfg.prior_sigma_theta_rad),
+        )
         prior_info = np.diag([sxy**-2, sxy**-2, cfg.prior_sigma_theta_rad**-2])
         return self._local.refine(q, init, predicted, prior_info)
 

@@ -123,6 +123,7 @@ class PointMap:
         window_theta: float,
         theta_step: float,
         distinct_m: float = 0.0,
+        prior_sigma: tuple[float, float] | None = None,
     ) -> tuple[Pose, float]:
         """Best pose of the robot-frame points ``q`` within ±window of ``prior`` on the field grid.
 
@@ -130,6 +131,8 @@ class PointMap:
         refined while its upper bound beats the best fine score (up to MAX_BRANCHES blocks).
         With ``distinct_m`` > 0, ``last_second_best`` is then the best score of poses more than
         that far (m) from the best one: close to the best score means an ambiguous match.
+        ``prior_sigma`` = (m, rad) weighs each candidate by a Gaussian of its distance from the
+        prior (as Cartographer's real-time matcher), so a bare corridor keeps the prediction.
         """
         _, field, coarse = self.field()
         res = self.config.grid_res_m
@@ -149,6 +152,15 @@ class PointMap:
             bounds[a0 : a0 + batch] = np.take(flat_coarse, idx, mode="clip").mean(axis=1)
         fy, fx = np.meshgrid(np.arange(COARSE), np.arange(COARSE), indexing="ij")
         fine = (fy * width + fx).ravel()
+        w_angle = np.ones(len(thetas))
+        w_fine = np.ones((len(offsets), COARSE * COARSE))
+        if prior_sigma is not None:
+            sxy, sth = prior_sigma
+            w_angle = np.exp(-0.5 * ((thetas - prior[2]) / sth) ** 2)
+            ddx = cx.ravel()[:, None] + fx.ravel()[None, :]
+            ddy = cy.ravel()[:, None] + fy.ravel()[None, :]
+            w_fine = np.exp(-0.5 * (np.hypot(ddx, ddy) * res / sxy) ** 2)
+            bounds *= (w_angle[:, None] * w_fine.max(axis=1)[None, :]).astype(np.float32)
 
         def branch(bounds: np.ndarray) -> tuple[float, int, int, int]:
             best, best_a, best_o, best_i = -1.0, 0, 0, 0
@@ -158,7 +170,7 @@ class PointMap:
                 if bounds[a, o] <= best:
                     break
                 cells = base[a][:, None] + offsets[o] + fine[None, :]
-                scores = np.take(flat_field, cells, mode="clip").mean(axis=0)
+                scores = np.take(flat_field, cells, mode="clip").mean(axis=0) * w_angle[a] * w_fine[o]
                 i = int(np.argmax(scores))
                 if scores[i] > best:
                     best, best_a, best_o, best_i = float(scores[i]), a, o, i
