@@ -45,3 +45,6 @@ TURN_LATENCY = "/sage/voice/latency"  # voice.TurnLatency: per-turn latency brea
 SIM_VISITOR_SAY = "/sim/visitor_say"  # Text: a simulated visitor speaks it into the sim mic
 SIM_SPEAKER_BEARING = "/sim/speaker_bearing"  # voice.Doa: simulated visitor's bearing (truth)
 SIM_SPEAKER = "/sim/speaker"  # sim.SpeakerBearing: nearest person within 3 m (or none), with distance
+MAP_ODOM = "/localization/map_odom"  # PoseStamped: pose of the odom frame in the map (map->odom)
+GLOBAL_LOCALIZATION = "/localization/global"  # service: Text (any) -> LocalizationHealth; relocalize
+CLEAR_COSTMAPS = "/nav/clear_costmaps"  # service: Text (any) -> Text; forget scan obstacles

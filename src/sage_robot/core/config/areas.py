@@ -39,6 +39,25 @@ class NavSettings(Section):
     max_particles: int = Field(2000, gt=0, description="AMCL particles, maximum.")
     use_ekf: bool = Field(False, description="Fuse IMU yaw rate with odometry (EKF).")
     people_wait_s: float = Field(20.0, ge=0, description="Wait for people to step aside (s).")
+    keepout_mask: str = Field(
+        "", description="Nav2 keepout mask YAML; empty = NAME_keepout.yaml beside the map if any."
+    )
+    speed_mask: str = Field(
+        "", description="Nav2 speed mask YAML (percent of top speed); empty = NAME_speed.yaml if any."
+    )
+    replan_hz: float = Field(1.0, gt=0, description="Global replanning rate while driving (Hz).")
+    local_costmap_m: float = Field(6.0, gt=0, description="Side of the rolling local costmap (m).")
+    laser_beams: int = Field(60, gt=0, description="Beams per scan the particle filter uses.")
+    health_tolerance_m: float = Field(
+        0.15, gt=0, description="A beam fits the map when it ends this close to a wall (m)."
+    )
+    lost_below: float = Field(
+        0.35, ge=0, le=1, description="Localization counts as lost below this health score (0..1)."
+    )
+    relocalize_timeout_s: float = Field(
+        40.0, gt=0, description="Spin and relocalize this long before asking for help (s)."
+    )
+    seed: int = Field(0, description="Random seed of the particle filter.")
 
 
 class VoiceSettings(Section):
