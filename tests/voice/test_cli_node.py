@@ -12,9 +12,9 @@ from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.config import Settings
 from sage_robot.core.msgs import Text
-from sage_robot.core.msgs.voice import Phase, UiState
+from sage_robot.core.msgs.voice import AudioChunk, Phase, UiState
 from sage_robot.core.node import NodeContext
-from sage_robot.core.topics import HEARD, SIM_VISITOR_SAY, UI_STATE
+from sage_robot.core.topics import HEARD, SIM_VISITOR_AUDIO, SIM_VISITOR_SAY, UI_STATE
 from sage_robot.voice import node as voice_node
 from sage_robot.voice.audio_io import load_audio
 from sage_robot.voice.node import SIM_AUDIO_KEY, SIM_OUT_DIR_KEY, VoiceNode
@@ -52,8 +52,9 @@ def test_bad_input_is_one_clear_line(argv, message, capsys):
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
-async def test_voice_node_in_simulation(models, monkeypatch, tmp_path):
-    """The node wires the sim mic/speaker: a simulated visitor speaks, the robot hears it,
+async def test_voice_node_in_simulation(models, monkeypatch, tmp_path, pocketsphinx_data):
+    """The node wires the sim mic/speaker: a simulated visitor says the wake word (text
+    rendered into the mic) and a recorded command (audio into the mic); the robot hears it,
     has no brain to ask, says so, and writes what it said as a WAV file."""
     monkeypatch.setattr(voice_node.VoiceModels, "load", classmethod(lambda cls, s: models))
     clock = SimClock()
@@ -81,8 +82,9 @@ async def test_voice_node_in_simulation(models, monkeypatch, tmp_path):
         await asyncio.wait_for(wait(lambda: node.pipeline is not None), WAIT_S)
         await asyncio.wait_for(wait(lambda: bus.topics().get(SIM_VISITOR_SAY) is not None), WAIT_S)
         bus.publish(SIM_VISITOR_SAY, Text("Hey Jarvis."))
-        await clock.sleep(2.0)
-        bus.publish(SIM_VISITOR_SAY, Text("Where is the cafe?"))
+        await asyncio.wait_for(wait(lambda: node.pipeline.detections), WAIT_S)
+        go = load_audio(pocketsphinx_data / "goforward.raw")  # a real recording, as a WAV would be
+        bus.publish(SIM_VISITOR_AUDIO, AudioChunk(clock.now(), 16000, go.astype("<i2").tobytes()))
         await asyncio.wait_for(wait(lambda: list(tmp_path.glob("*.wav"))), WAIT_S)
     finally:
         stop.set()
@@ -90,7 +92,7 @@ async def test_voice_node_in_simulation(models, monkeypatch, tmp_path):
         await asyncio.gather(runner, return_exceptions=True)
         await node._close()
         await node.teardown()
-    assert heard and "cafe" in heard[0].lower()
+    assert heard and heard[0].lower().startswith("go forward")
     assert any(u.error_msg == "brain not running" for u in ui)
     assert Phase.SPEAKING in {u.phase for u in ui}
     assert node.stats()["turns"] == 1

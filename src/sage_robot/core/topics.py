@@ -43,6 +43,7 @@ LOC_HEALTH = "/localization/health"  # nav.LocalizationHealth
 AUDIO_OUT = "/sage/audio_out"  # voice.AudioChunk: the robot's speech, for the web pages
 TURN_LATENCY = "/sage/voice/latency"  # voice.TurnLatency: per-turn latency breakdown
 SIM_VISITOR_SAY = "/sim/visitor_say"  # Text: a simulated visitor speaks it into the sim mic
+SIM_VISITOR_AUDIO = "/sim/visitor_audio"  # voice.AudioChunk: recorded audio played into the sim mic
 SIM_SPEAKER_BEARING = "/sim/speaker_bearing"  # voice.Doa: simulated visitor's bearing (truth)
 SIM_SPEAKER = "/sim/speaker"  # sim.SpeakerBearing: nearest person within 3 m (or none), with distance
 MAP_ODOM = "/localization/map_odom"  # PoseStamped: pose of the odom frame in the map (map->odom)

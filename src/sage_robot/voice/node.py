@@ -7,8 +7,9 @@ Without the voice extras the node still runs: it publishes the DOA and a face st
 
 Topics: publishes ``/sage/ui_state``, ``/doa`` (~12.5 Hz), ``/sage/heard``,
 ``/sage/audio_out``, ``/sage/voice/latency``; subscribes ``/sage/say``; in simulation
-also ``/sim/speaker`` (sim.SpeakerBearing: the nearest person) and ``/sim/visitor_say`` (Text
-a simulated visitor says into the microphone, rendered with the robot's TTS).
+also ``/sim/speaker`` (sim.SpeakerBearing: the nearest person), ``/sim/visitor_say`` (Text
+a simulated visitor says into the microphone, rendered with the robot's TTS) and
+``/sim/visitor_audio`` (AudioChunk: recorded audio, e.g. a WAV file, into the microphone).
 """
 
 from __future__ import annotations
@@ -20,14 +21,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
+import numpy as np
+
 from sage_robot.core.clock import Clock
 from sage_robot.core.config.areas import VoiceSettings
 from sage_robot.core.errors import ConfigError, DeviceNotConnectedError
 from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.sim import SpeakerBearing
-from sage_robot.core.msgs.voice import Doa, Phase, UiState
+from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
 from sage_robot.core.node import Node
-from sage_robot.core.topics import DOA, SIM_SPEAKER, SIM_VISITOR_SAY, UI_STATE
+from sage_robot.core.topics import DOA, SIM_SPEAKER, SIM_VISITOR_AUDIO, SIM_VISITOR_SAY, UI_STATE
 from sage_robot.hardware.doa import FRONT_DEG, XVF3800Doa
 from sage_robot.voice.audio_io import SAMPLE_RATE, resample
 from sage_robot.voice.pipeline import VoicePipeline
@@ -138,6 +141,7 @@ class VoiceNode(Node):
                                        self._speaker)  # fmt: skip
         if self.simulated:
             self.subscribe(SIM_VISITOR_SAY, Text, self._visitor_says)
+            self.subscribe(SIM_VISITOR_AUDIO, AudioChunk, self._visitor_audio)
         self.log.info("voice ready", source="sim" if self.simulated else "mic",
                       wake=",".join(self.vs.wake_models), tts=self.vs.tts_engine)  # fmt: skip
         await self.pipeline.run()
@@ -185,6 +189,14 @@ class VoiceNode(Node):
         speech = self.models.speech
         pcm = await asyncio.to_thread(speech.synthesize, msg.data)
         self._mic.inject(resample(pcm, speech.sample_rate, SAMPLE_RATE))
+
+    def _visitor_audio(self, msg: AudioChunk) -> None:
+        """Simulation: recorded audio (e.g. a WAV file or a browser upload) into the sim mic."""
+        if msg.sample_rate <= 0 or len(msg.pcm) % 2:
+            self.log.warning("bad visitor audio", sample_rate=msg.sample_rate, size=len(msg.pcm))
+            return
+        pcm = np.frombuffer(msg.pcm, dtype="<i2").astype(np.int16)
+        self._mic.inject(resample(pcm, msg.sample_rate, SAMPLE_RATE))
 
     async def teardown(self) -> None:
         for dev in (self._mic, self._speaker, self._xvf):
