@@ -123,3 +123,14 @@ def test_far_scan_obstacles_are_forgotten() -> None:
     cm.update_scan((15.0, 2.0, 0.0), np.array([0.0]), np.array([1.0]), 12.0, forget_beyond_m=5.0)
     assert cm.cost_at(4.0, 2.0)[()] == 0  # 11 m away: forgotten
     assert cm.cost_at(16.0, 2.0)[()] == LETHAL
+
+
+def test_scikit_image_backend_plans_the_same_way(monkeypatch) -> None:
+    import sage_robot.nav.planner as planner_module
+
+    cm = Costmap.from_grid(draw(CORRIDOR, 0.1, scale=5), 0.25, 0.55, 3.0)
+    with_astar = plan(cm, (1.0, 2.5), (9.0, 1.0))
+    monkeypatch.setattr(planner_module, "_astar_backend", lambda: None)  # as on aarch64
+    with_mcp = plan(cm, (1.0, 2.5), (9.0, 1.0))
+    assert (cm.cost_at(with_mcp.points[:, 0], with_mcp.points[:, 1]) < INSCRIBED).all()
+    assert with_mcp.length_m == pytest.approx(with_astar.length_m, rel=0.1)
