@@ -33,7 +33,12 @@ class FrameSource(Protocol):
 
 class V4l2Camera:
     def __init__(self, cfg: CameraSettings) -> None:
-        import cv2
+        try:
+            import cv2
+        except ImportError:
+            raise DeviceNotConnectedError(
+                "OpenCV is not installed, so no camera can be read: pip install 'sage-robot[robot]'"
+            ) from None
 
         self._cv2 = cv2
         dev: int | str = int(cfg.device) if cfg.device.isdigit() else cfg.device
