@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
 import math
 
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalStatus
 from sage_robot.core.msgs import Event, Pose2D, Text
-from sage_robot.core.msgs.nav import NavigateGoal, NavState, PlaceList, TourGoal
+from sage_robot.core.msgs.nav import NavigateFeedback, NavigateGoal, NavState, PlaceList, TourGoal
 
 from .nav_grids import draw
 from .nav_sim import running, settings_for, wait_until, write_building
@@ -51,14 +52,22 @@ def _events(bus):
     return got
 
 
+def _nav_states(bus, clock):
+    """(simulated time, NavigateFeedback) of every NAV_STATE message, from subscription on."""
+    got: list[tuple[float, NavigateFeedback]] = []
+    bus.subscribe(topics.NAV_STATE, NavigateFeedback, lambda m: got.append((clock.now(), m)), maxsize=1000)
+    return got
+
+
 async def _go(bus, place):
     return await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=place))
 
 
 async def test_drives_to_a_place_by_alias(tmp_path) -> None:
     grid, settings = _building(tmp_path, WIDE)
-    async with running(settings, grid, A) as (bus, _clock, sim):
+    async with running(settings, grid, A) as (bus, clock, sim):
         events = _events(bus)
+        nav_states = _nav_states(bus, clock)
         places = await bus.call(topics.PLACES, Text(""))
         assert isinstance(places, PlaceList) and {p.name for p in places.places} == {"ROOM_A", "ROOM_B"}
         handle = await _go(bus, "room b")
@@ -80,6 +89,19 @@ async def test_drives_to_a_place_by_alias(tmp_path) -> None:
         assert sim.collisions == 0
         assert not sim.reversed_commands()
         assert sim.cmds[-1][1].is_zero
+        # NAV_STATE: latched IDLE first, every change, 1 Hz while driving, IDLE at the end
+        kinds = [m.state for _, m in nav_states]
+        assert kinds[0] is NavState.IDLE and kinds[-1] is NavState.IDLE
+        assert NavState.PLANNING in kinds
+        driving = [(t, m) for t, m in nav_states if m.state is NavState.DRIVING]
+        assert all(m.place == "ROOM_B" for _, m in driving)
+        span = driving[-1][0] - driving[0][0]
+        assert span > 5.0 and len(driving) >= int(span)  # at least one a second
+        assert max(b[0] - a[0] for a, b in itertools.pairwise(driving)) <= 1.0 + 0.2
+        assert any(m.distance_remaining_m > 1.0 for _, m in driving)
+        n = len(nav_states)
+        await clock.sleep(3.0)
+        assert len(nav_states) == n  # idle: no repeats
         where = await bus.call(topics.WHERE_AM_I, Text(""))
         assert where.nearest_place == "ROOM_B" and where.localized
 
@@ -163,8 +185,9 @@ async def test_unknown_place_aborts_with_the_known_places(tmp_path) -> None:
 
 async def test_tour_visits_in_order_and_resumes(tmp_path) -> None:
     grid, settings = _building(tmp_path, WIDE)
-    async with running(settings, grid, A) as (bus, _clock, sim):
+    async with running(settings, grid, A) as (bus, clock, sim):
         events = _events(bus)
+        nav_states = _nav_states(bus, clock)
         handle = await bus.actions.send_goal(topics.TOUR, TourGoal(("ROOM_B", "ROOM_A"), 2.0, start_index=1))
         result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
         assert result.ok and result.value.succeeded and result.value.completed == ("ROOM_A",)
@@ -173,6 +196,9 @@ async def test_tour_visits_in_order_and_resumes(tmp_path) -> None:
         assert result.value.completed == ("ROOM_B", "ROOM_A"), result
         arrived = [e.data["place"] for e in events if e.kind == "arrived"]
         assert arrived == ["ROOM_A", "ROOM_B", "ROOM_A"]
+        driven = [m.place for _, m in nav_states if m.state is NavState.DRIVING]
+        assert {"ROOM_A", "ROOM_B"} <= set(driven)  # tour legs show on NAV_STATE too
+        assert nav_states[-1][1].state is NavState.IDLE
         assert sim.collisions == 0 and not sim.reversed_commands()
 
 

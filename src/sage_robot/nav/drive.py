@@ -86,7 +86,9 @@ class GoalRun:
     def feedback(self, state: NavState) -> None:
         self.state = state
         eta = self.remaining / max(ETA_MIN_SPEED_MPS, self.params.max_v * 0.7)
-        self._feedback(NavigateFeedback(state, self.target.name, round(self.remaining, 2), round(eta, 1)))
+        fb = NavigateFeedback(state, self.target.name, round(self.remaining, 2), round(eta, 1))
+        self.node.set_state(fb)
+        self._feedback(fb)
 
     def _track(self, pose: tuple[float, float, float]) -> None:
         if self._last_xy is not None:

@@ -39,6 +39,8 @@ from sage_robot.nav.mapdata import load_for
 Pose = tuple[float, float, float]
 
 GLOBAL_OBSTACLE_MEMORY_M = 12.0  # scan obstacles further than this from the robot are forgotten
+STATE_PERIOD_S = 1.0  # NAV_STATE is repeated this often while a goal or tour runs (s)
+IDLE = NavigateFeedback(NavState.IDLE)
 
 
 class NavigatorNode(Node):
@@ -60,6 +62,10 @@ class NavigatorNode(Node):
         self.subscribe(topics.MAP_ODOM, PoseStamped, self._on_correction)
         self.subscribe(topics.SCAN, LaserScan, self._on_scan, maxsize=1)
         self.subscribe(topics.LOC_HEALTH, LocalizationHealth, self._on_health)
+        self.state = IDLE
+        self.bus.declare(topics.NAV_STATE, NavigateFeedback, latched=True)
+        self.bus.publish(topics.NAV_STATE, self.state)
+        self.every(STATE_PERIOD_S, self._repeat_state, "navigator.state")
         self.bus.actions.serve(topics.NAVIGATE_TO, self._navigate)
         self.bus.actions.serve(topics.TOUR, self._tour)
         self.bus.serve(topics.CANCEL_NAV, self._cancel)
@@ -116,6 +122,21 @@ class NavigatorNode(Node):
 
     def event(self, kind: str, message: str, **data: str) -> None:
         self.bus.publish(topics.EVENTS, Event(self.clock.now(), self.name, kind, message, dict(data)))
+
+    def set_state(self, fb: NavigateFeedback) -> None:
+        """Publish the navigator's state on NAV_STATE when it changes (state or place); the
+        timer repeats the latest at 1 Hz (with fresh distance and ETA) while a goal runs."""
+        changed = (fb.state, fb.place) != (self.state.state, self.state.place)
+        self.state = fb
+        if changed:
+            self.bus.publish(topics.NAV_STATE, fb)
+
+    def _busy(self) -> bool:
+        return any(self.bus.actions.active(a) is not None for a in (topics.NAVIGATE_TO, topics.TOUR))
+
+    def _repeat_state(self) -> None:
+        if self.state.state is not NavState.IDLE or self._busy():
+            self.bus.publish(topics.NAV_STATE, self.state)
 
     def publish_plan(self, points: np.ndarray) -> None:
         poses = tuple(Pose2D(float(x), float(y), 0.0) for x, y in points[::4])
@@ -180,6 +201,7 @@ class NavigatorNode(Node):
             return await run.execute()
         finally:
             self.stop()
+            self.set_state(IDLE)
 
     async def _tour(self, goal: TourGoal, ctx: GoalContext) -> TourResult:
         nav = self.bus.actions.active(topics.NAVIGATE_TO)
