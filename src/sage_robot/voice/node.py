@@ -80,9 +80,13 @@ def build_pipeline(
     return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt)
 
 
-async def in_daemon_thread(fn: Callable[..., T], *args: Any) -> T:
-    """Run ``fn`` in a daemon thread: model loading takes seconds, and a process that stops
-    meanwhile (a short ``sage sim --duration``) must not wait for it to finish."""
+async def in_load_thread(fn: Callable[..., T], *args: Any) -> T:
+    """Run ``fn`` (model loading: seconds of native code) in its own thread.
+
+    The thread is *not* a daemon: a process that stops meanwhile (Ctrl-C early, a short
+    ``sage sim --duration``) waits at exit for the load to finish, because leaving the
+    interpreter while onnxruntime / CTranslate2 are still loading aborts the process
+    ("terminate called without an active exception", or a segfault)."""
     loop = asyncio.get_running_loop()
     fut: asyncio.Future[T] = loop.create_future()
 
@@ -102,7 +106,7 @@ async def in_daemon_thread(fn: Callable[..., T], *args: Any) -> T:
         with contextlib.suppress(RuntimeError):  # the loop closed: nobody waits any more
             loop.call_soon_threadsafe(settle, value, exc)
 
-    threading.Thread(target=work, name="voice.load", daemon=True).start()
+    threading.Thread(target=work, name="voice.load", daemon=False).start()
     return await fut
 
 
@@ -130,7 +134,7 @@ class VoiceNode(Node):
     async def _start_pipeline(self) -> None:
         """Load the models off the loop (seconds), then run the pipeline forever."""
         try:
-            models = await in_daemon_thread(VoiceModels.load, self.vs)
+            models = await in_load_thread(VoiceModels.load, self.vs)
             self._open_audio()
         except (ConfigError, DeviceNotConnectedError) as exc:
             self.log.error("voice pipeline unavailable", error=str(exc))
