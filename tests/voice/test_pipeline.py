@@ -14,8 +14,17 @@ import pytest
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.msgs import Text
+from sage_robot.core.msgs.nav import NavigateFeedback, NavState
 from sage_robot.core.msgs.voice import AudioChunk, Phase, TurnLatency, UiState
-from sage_robot.core.topics import AUDIO_OUT, CONVERSE, HEARD, SAY, TURN_LATENCY, UI_STATE
+from sage_robot.core.topics import (
+    AUDIO_OUT,
+    CONVERSE,
+    HEARD,
+    NAV_STATE,
+    SAY,
+    TURN_LATENCY,
+    UI_STATE,
+)
 from sage_robot.sim.audio import ECHO_GAIN, SimMicrophone, SimSpeaker
 from sage_robot.voice.node import build_pipeline
 from sage_robot.voice.pipeline import NO_BRAIN, State
@@ -195,3 +204,31 @@ async def test_barge_in_cancels_the_reply(voice_settings, models, say16k):
     assert cancelled == [True], "the brain's goal was cancelled"
     assert room.speaker.aborted >= 1
     assert room.pipeline.mouth.sentences_spoken < 8
+
+
+async def test_face_shows_navigating_while_idle(voice_settings, models, say16k):
+    """The navigator's state (/nav/state) puts the resting face into "navigating"; a
+    conversation during the drive takes precedence; the end of navigation gives "idle"."""
+    room = Room(voice_settings, models)
+    goals: list[str] = []
+    echo_brain(room.bus, room.clock, goals)
+    async with room:
+        room.bus.publish(NAV_STATE, NavigateFeedback(NavState.PLANNING, "library", 40.0, 80.0))
+        await room.until(lambda: room.ui[-1].phase is Phase.NAVIGATING, "navigating")
+        room.bus.publish(NAV_STATE, NavigateFeedback(NavState.DRIVING, "library", 39.0, 78.0))
+        room.mic.inject(np.concatenate([silence(0.5), say16k("Hey Jarvis."), silence(0.6),
+                                        say16k("Where is the library?"), silence(0.5)]))
+        await room.until(lambda: room.latency and room.idle(), "the turn to end")
+        assert room.ui[-1].phase is Phase.NAVIGATING  # back to the drive after the turn
+        room.bus.publish(NAV_STATE, NavigateFeedback(NavState.IDLE, "library"))
+        await room.until(lambda: room.ui[-1].phase is Phase.IDLE, "idle after arrival")
+    assert goals and "library" in goals[0].lower()
+    phases = room.phases()
+    assert is_subsequence(
+        [Phase.IDLE, Phase.NAVIGATING, Phase.LISTENING, Phase.THINKING, Phase.SPEAKING,
+         Phase.NAVIGATING, Phase.IDLE],
+        phases,
+    ), phases
+    # No "navigating" in the middle of the conversation (wake word → reply spoken).
+    talk = phases[phases.index(Phase.LISTENING):phases.index(Phase.SPEAKING) + 1]
+    assert Phase.NAVIGATING not in talk, phases

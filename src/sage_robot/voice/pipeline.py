@@ -9,6 +9,9 @@ After the reply the robot listens ``follow_up_s`` more without a wake word.
 A wake word while the robot thinks or speaks interrupts it (barge-in) — unless the robot
 itself just said something that sounds like the wake word (its reference detector, see
 :mod:`player`): its own voice is ignored. Text on ``/sage/say`` is spoken too.
+
+While the navigator (``/nav/state``) is on its way and no conversation runs, the face's
+phase is ``navigating`` instead of ``idle``; listening, thinking and speaking take precedence.
 """
 
 from __future__ import annotations
@@ -26,8 +29,9 @@ from sage_robot.core.clock import Clock
 from sage_robot.core.config.areas import VoiceSettings
 from sage_robot.core.log import StructLogger, get_logger
 from sage_robot.core.msgs import Text
+from sage_robot.core.msgs.nav import NavigateFeedback, NavState
 from sage_robot.core.msgs.voice import Phase, TurnLatency, UiState
-from sage_robot.core.topics import CONVERSE, HEARD, SAY, TURN_LATENCY, UI_STATE
+from sage_robot.core.topics import CONVERSE, HEARD, NAV_STATE, SAY, TURN_LATENCY, UI_STATE
 from sage_robot.hardware.audio import Microphone
 from sage_robot.voice.player import Mouth
 from sage_robot.voice.stt import SpeechToText, Transcript
@@ -40,6 +44,10 @@ WAKE_TAIL_S = 0.24  # audio right after a detection is the end of the wake phras
 NO_BRAIN = "Sorry, my brain is not running right now."
 BRAIN_FAILED = "Sorry, I could not come up with an answer."
 UI_TOKENS_MAX = 400  # characters of the reply shown on the face
+# Navigator states in which the robot is on its way (the face shows "navigating" when idle).
+MOVING_NAV_STATES = frozenset(
+    {NavState.PLANNING, NavState.DRIVING, NavState.WAITING_FOR_PEOPLE, NavState.RECOVERING}
+)
 
 
 class State(str, enum.Enum):
@@ -101,6 +109,7 @@ class VoicePipeline:
         self._follow_up = False
         self._say_task: asyncio.Task[int] | None = None
         self._early: tuple[float, asyncio.Future[Transcript]] | None = None  # (speech_s, STT)
+        self.navigating = False  # the navigator is on its way (from /nav/state)
         self.mouth.on_viseme = self._viseme
 
     # ------------------------------------------------------------ ui state
@@ -109,6 +118,19 @@ class VoicePipeline:
         if new != self.ui:
             self.ui = new
             self.bus.publish(UI_STATE, new)
+
+    @property
+    def resting_phase(self) -> Phase:
+        """What the face shows when no conversation runs."""
+        return Phase.NAVIGATING if self.navigating else Phase.IDLE
+
+    def _set_resting(self) -> None:
+        self._set_ui(phase=self.resting_phase)
+
+    def _on_nav_state(self, msg: NavigateFeedback) -> None:
+        self.navigating = msg.state in MOVING_NAV_STATES
+        if self.state is State.IDLE and not self.mouth.speaking:
+            self._set_resting()
 
     def _viseme(self, opening: float) -> None:
         if self.mouth.speaking:
@@ -120,6 +142,7 @@ class VoicePipeline:
     async def run(self) -> None:
         """Read the microphone forever (cancel to stop)."""
         self.bus.subscribe(SAY, Text, self._on_say)
+        self.bus.subscribe(NAV_STATE, NavigateFeedback, self._on_nav_state)
         self.bus.publish(UI_STATE, self.ui)  # the face's first state
         try:
             while True:
@@ -207,7 +230,7 @@ class VoicePipeline:
         if utt.reason is EndReason.NO_SPEECH:
             self.log.info("nobody spoke" if not self._follow_up else "follow-up window closed")
             self.state = State.IDLE
-            self._set_ui(phase=Phase.IDLE)
+            self._set_resting()
             return
         if self._times is None or self._follow_up:
             self.turns += 1
@@ -254,7 +277,7 @@ class VoicePipeline:
             self._start_listening(self.settings.follow_up_s, follow_up=True)
         else:
             self.state = State.IDLE
-            self._set_ui(phase=Phase.IDLE)
+            self._set_resting()
 
     async def _converse(self, text: str, times: TurnTimes) -> bool:
         """Ask the brain and speak its streamed reply; True when a reply was spoken."""
@@ -325,7 +348,7 @@ class VoicePipeline:
         await asyncio.gather(self._say_task, return_exceptions=True)  # barge-in cancels it
         self._say_task = None
         if self.state is State.IDLE and not self.mouth.speaking:
-            self._set_ui(phase=Phase.IDLE)
+            self._set_resting()
 
     async def wait_idle(self, poll_s: float = 0.05) -> None:
         """Until no turn runs and nothing is being said (tests, benchmarks)."""
