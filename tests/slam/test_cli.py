@@ -52,3 +52,35 @@ def test_save_again_from_a_pose_graph(
     assert read_map(tmp_path / "coarse.yaml").resolution == 0.1
     assert main(["slam", "save", "x", "--from", str(tmp_path / "none.graph.npz")]) == 2
     assert "pose graph file not found" in capsys.readouterr().err
+
+
+def test_sage_slam_runs_and_saves(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`sage slam --duration 5` with the whole sim_slam profile (web and Foxglove on free
+    loopback ports, the simulation as fast as possible): it maps and saves on exit."""
+    profile = tmp_path / "profile.yaml"
+    profile.write_text(
+        "sim: {speed: null}\n"
+        "web: {host: 127.0.0.1, port: 0}\n"
+        "ops: {foxglove_port: 0}\n"
+        f"slam: {{out_dir: {tmp_path / 'unused'}, resolution_m: 0.1}}\n"
+    )
+    out = tmp_path / "maps"
+    rc = main(["--profile", str(profile), "slam", "--duration", "5", "--out", str(out), "--name", "five"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "web" in text.splitlines()[0] and "slam" in text.splitlines()[0]
+    from sage_robot.core.mapio import read_map
+
+    grid = read_map(out / "five.yaml")
+    assert grid.resolution == 0.1  # the profile's slam section reached the node
+    assert (grid.data == 100).sum() > 50  # the walls around the dock
+    assert len((out / "five.trajectory.txt").read_text().splitlines()) > 10  # 5 s of scans
+    assert not (tmp_path / "unused").exists()  # --out wins over slam.out_dir
+
+
+def test_bad_slam_setting_is_a_profile_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    profile = tmp_path / "profile.yaml"
+    profile.write_text("slam: {keyframe_dist_m: -1}\n")
+    assert main(["--profile", str(profile), "slam", "--duration", "5", "--headless"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "slam.keyframe_dist_m" in err and "\n" not in err

@@ -100,8 +100,11 @@ async def test_node_maps_publishes_and_saves(tmp_path: Path) -> None:
 
 def test_sim_slam_profile() -> None:
     names = [n for n, _ in PROFILES["sim_slam"]]
-    assert "slam" in names
-    assert not {"localization", "navigator", "map_server"} & set(names)
+    # Mapping mode: world, firmware model, odometry bridge, web (teleop, growing map, save),
+    # Foxglove, liveness and battery alerts, SLAM; no map-based nodes, no tour guide.
+    assert set(names) == {
+        "sim_world", "mcu_sim", "serial_bridge", "web", "foxglove", "heartbeat", "battery_watchdog", "slam"
+    }
     assert set(names) - {"slam"} <= {n for n, _ in PROFILES["sim"]}
     assert "slam" in [n for n, _ in PROFILES["slam"]]
 

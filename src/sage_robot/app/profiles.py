@@ -44,8 +44,18 @@ PROFILES: dict[str, list[tuple[str, bool]]] = {
              ("serial_bridge", True), ("slam", False)],
 }
 
-# SLAM in the simulator (`sage slam`): the "sim" profile as it stands when this module is
-# imported, without localization, navigator and map server, plus the SLAM node.
+# SLAM in the simulator (`sage slam`): what mapping needs and nothing else (the seed's
+# slam_robot.sh, simulated): the world and the firmware model, the serial bridge (/odom), the
+# web server (teleop, the growing map, `sage slam save`), Foxglove, liveness and battery alerts
+# for a long drive, and the SLAM node. No map server, localization or navigator (there is no
+# map yet), no knowledge base, brain or voice (nobody gets a tour while the map is built).
 PROFILES["sim_slam"] = [
-    entry for entry in PROFILES["sim"] if entry[0] not in ("localization", "navigator", "map_server")
-] + [("slam", False)]
+    ("sim_world", True),
+    ("mcu_sim", True),
+    ("heartbeat", False),
+    ("battery_watchdog", False),
+    ("foxglove", False),
+    ("serial_bridge", True),
+    ("web", True),
+    ("slam", False),
+]

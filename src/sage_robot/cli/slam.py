@@ -8,10 +8,12 @@
 - ``sage slam replay LOG [--out DIR] [--name NAME] [--limit N]``: run the same SLAM over a
   CARMEN log (FLASER / ROBOTLASER1 / ODOM, optionally gzipped) with a progress bar and write
   map, pose graph and trajectory.
-- ``sage slam save NAME --from OLD.graph.npz [--resolution R]``: write a saved session again
-  under another name (map re-rendered from the pose graph, e.g. at another resolution). A
-  running session is saved by the ``/slam/save`` service or on exit: the bus is in-process,
-  so another ``sage`` process cannot reach it.
+- ``sage slam save NAME [--url URL]``: save the running session (``sage slam`` or ``sage up
+  --mode slam``) as NAME through its web server (``POST /api/slam/save``, like ``sage status``
+  reaches a robot): logs in as the operator with ``SAGE_OPERATOR_PASSWORD`` or the stored
+  generated password, and the node writes into its own output directory.
+- ``sage slam save NAME --from OLD.graph.npz [--resolution R] [--out DIR]``: write a saved
+  session again under another name (map re-rendered from the pose graph).
 - On the real robot: ``sage up --mode slam`` (the "slam" profile includes the node).
 """
 
@@ -20,14 +22,20 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import urllib.error
+import urllib.request
+from http.cookiejar import CookieJar
 from pathlib import Path
+from typing import Any
 
 DEFAULT_NAME = "slam_map"
+DEFAULT_OUT = "maps"  # ./maps unless the profile's slam.out_dir says otherwise
+HTTP_TIMEOUT_S = 130.0  # the server allows the save 120 s
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser("slam", help="build a map: in the simulator, or offline from a CARMEN log")
-    p.add_argument("--out", default="maps", help="directory for the saved map (default: ./maps)")
+    p.add_argument("--out", help="directory for the saved map (default: slam.out_dir, else ./maps)")
     p.add_argument("--name", default=DEFAULT_NAME, help="map name (files NAME.yaml, NAME.pgm, ...)")
     p.add_argument("--speed", type=float, help="simulator real-time factor")
     p.add_argument("--duration", type=float, help="stop (and save) after this many simulated seconds")
@@ -42,11 +50,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     r.add_argument("--resolution", type=float, default=0.05, help="map cell size (m)")
     r.add_argument("--json", action="store_true", help="print a JSON summary")
     r.set_defaults(func=run_replay)
-    v = ssub.add_parser("save", help="write a saved session again as NAME (e.g. another resolution)")
-    v.add_argument("name", help="new map name")
-    v.add_argument("--from", dest="source", required=True, help="a saved NAME.graph.npz or NAME.yaml")
-    v.add_argument("--out", default="maps", help="output directory (default: ./maps)")
-    v.add_argument("--resolution", type=float, default=0.05, help="map cell size (m)")
+    v = ssub.add_parser("save", help="save the running session as NAME, or a saved one again (--from)")
+    v.add_argument("name", help="map name (files NAME.yaml, NAME.pgm, ...)")
+    v.add_argument("--url", help="robot web address (default http://127.0.0.1:<web.port>)")
+    v.add_argument("--from", dest="source", help="instead: write a saved NAME.graph.npz again")
+    v.add_argument("--out", help="with --from: output directory (default: ./maps)")
+    v.add_argument("--resolution", type=float, default=0.05, help="with --from: map cell size (m)")
     v.set_defaults(func=run_save)
 
 
@@ -63,7 +72,7 @@ def run_mapping(args: argparse.Namespace) -> int:
     overrides = {"sim": {"speed": args.speed}} if args.speed else None
     settings = load_profile(args.profile, overrides)
     ctx = make_context(settings, simulated=True)
-    ctx.resources[OUT_DIR_RESOURCE] = str(Path(args.out).resolve())
+    ctx.resources[OUT_DIR_RESOURCE] = str(Path(args.out or settings.slam.out_dir or DEFAULT_OUT).resolve())
     ctx.resources[AUTOSAVE_RESOURCE] = args.name
     specs = [s for s in specs_for("sim_slam") if not (args.headless and s.name == "web")]
     print(f"SAGE SLAM in simulation: {', '.join(s.name for s in specs)}; Ctrl-C to stop and save")
@@ -81,12 +90,69 @@ def run_save(args: argparse.Namespace) -> int:
     from sage_robot.nav.slam.store import build_map, check_name, load_session, save_session
 
     check_name(args.name)
+    if args.source is None:
+        if args.out is not None:
+            raise ConfigError("--out goes with --from: a running session saves into its own directory")
+        return save_running(args)
+    if args.url is not None:
+        raise ConfigError("--url and --from exclude each other: --from re-writes a saved session here")
     if args.resolution <= 0:
         raise ConfigError(f"--resolution must be > 0 m, got {args.resolution}")
     slam = load_session(args.source)
-    paths = save_session(slam, args.out, args.name, build_map(slam, args.resolution))
+    paths = save_session(slam, args.out or DEFAULT_OUT, args.name, build_map(slam, args.resolution))
     print(f"map: {paths['yaml']}\npose graph: {paths['graph']}")
     return 0
+
+
+def save_running(args: argparse.Namespace) -> int:
+    """Ask the running robot's web server to save its SLAM session as ``args.name``."""
+    from sage_robot.core.config import load_profile
+
+    settings = load_profile(args.profile)
+    base = (args.url or f"http://127.0.0.1:{settings.web.port}").rstrip("/")
+    opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(CookieJar()))
+    _post(opener, base, "/api/login", {"password": client_password(settings)})
+    reply = _post(opener, base, "/api/slam/save", {"name": args.name})
+    print(f"map: {reply['yaml']}\npose graph: {reply['graph']}\ntrajectory: {reply['trajectory']}")
+    return 0
+
+
+def client_password(settings: Any) -> str:
+    """The operator password as the web server reads it, without generating a new one."""
+    from sage_robot.core.config import read_secret
+    from sage_robot.core.errors import SageError
+    from sage_robot.core.paths import state_dir
+    from sage_robot.web.auth import PASSWORD_ENV, PASSWORD_FILE
+
+    secret = read_secret(PASSWORD_ENV, settings.secrets_file or None)
+    if secret is not None:
+        return secret.get_secret_value()
+    path = state_dir() / PASSWORD_FILE
+    text = path.read_text(encoding="utf-8").strip() if path.exists() else ""
+    if not text:
+        raise SageError(f"no operator password: set {PASSWORD_ENV} (or run this where {path} exists)")
+    return text
+
+
+def _post(opener: Any, base: str, route: str, body: dict[str, Any]) -> dict[str, Any]:
+    """POST JSON; one clear SageError for an unreachable server or a refusal."""
+    from sage_robot.core.errors import SageError
+
+    req = urllib.request.Request(
+        base + route, json.dumps(body).encode(), {"Content-Type": "application/json"}, method="POST"
+    )
+    try:
+        with opener.open(req, timeout=HTTP_TIMEOUT_S) as resp:
+            return json.load(resp)  # type: ignore[no-any-return]
+    except urllib.error.HTTPError as exc:
+        try:
+            detail = json.load(exc).get("error", exc.reason)
+        except ValueError:
+            detail = exc.reason
+        raise SageError(f"{base}{route}: {exc.code} {detail}") from None
+    except (urllib.error.URLError, OSError) as exc:
+        hint = "is `sage slam` or `sage up --mode slam` running?"
+        raise SageError(f"no robot answers at {base} ({exc}); {hint}") from None
 
 
 def run_replay(args: argparse.Namespace) -> int:

@@ -146,3 +146,26 @@ class EmailSettings(Section):
     sender: str = Field("sage@localhost", description="From address.")
     recipients: tuple[str, ...] = Field((), description="Who hears about a low battery.")
     min_interval_s: float = Field(900.0, ge=0, description="At most one alert per kind per (s).")
+
+
+class SlamSettings(Section):
+    """Online SLAM (mapping mode). Distances in m, angles in rad, map frame = the first scan's."""
+
+    resolution_m: float = Field(0.05, gt=0, le=1, description="Occupancy map cell size (m).")
+    max_range_m: float = Field(30.0, gt=0, description="Laser hits beyond this are ignored (m).")
+    keyframe_dist_m: float = Field(0.3, gt=0, description="A new pose-graph keyframe after this travel (m).")
+    keyframe_angle_rad: float = Field(0.2, gt=0, description="...or after this much turning (rad).")
+    loop_radius_m: float = Field(
+        6.0, gt=0, description="Loop-closure candidates lie within this distance of a new keyframe (m)."
+    )
+    loop_min_travel_m: float = Field(
+        12.0, gt=0, description="...and at least this far back along the trajectory (m)."
+    )
+    loop_min_score: float = Field(
+        0.55, ge=0, le=1, description="Mean match likelihood a loop closure needs (0..1)."
+    )
+    loop_min_inliers: float = Field(
+        0.65, ge=0, le=1, description="Fraction of scan points on the map a loop closure needs (0..1)."
+    )
+    map_period_s: float = Field(1.0, gt=0, description="Publish the growing /map at most this often (s).")
+    out_dir: str = Field("", description="Where maps are saved; empty = <state dir>/maps.")

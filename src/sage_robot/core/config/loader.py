@@ -16,6 +16,7 @@ from sage_robot.core.config.areas import (
     LlmSettings,
     NavSettings,
     SimSettings,
+    SlamSettings,
     VoiceSettings,
     WebSettings,
 )
@@ -42,6 +43,7 @@ class Settings(Section):
     kb: KbSettings = Field(default_factory=KbSettings)
     web: WebSettings = Field(default_factory=WebSettings)
     email: EmailSettings = Field(default_factory=EmailSettings)
+    slam: SlamSettings = Field(default_factory=SlamSettings)
     secrets_file: str = Field("", description="Key file (KEY=VALUE or JSON), mode 600.")
 
 

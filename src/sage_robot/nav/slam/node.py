@@ -2,19 +2,21 @@
 
 - subscribes ``/scan`` (newest only: a scan that arrives while one is being matched replaces
   the waiting one) and ``/odom`` (the latest pose is paired with each scan);
-- publishes the growing map on ``/map`` (latched) once a second when it changed, and a
-  :class:`SlamProgress` on ``/slam/progress`` after each scan;
+- publishes the growing map on ``/map`` (latched) every ``slam.map_period_s`` (1 s) when it
+  changed, and a :class:`SlamProgress` on ``/slam/progress`` (latched) after each scan;
 - offers ``/slam/save`` (:class:`SaveMapRequest` → :class:`SaveMapReply`).
 
 Matching and map building run in a worker thread so the event loop never stalls. The laser
 mount comes from the profile (``robot.lidar``). Map files go to ``ctx.resources["slam_out_dir"]``
-when set, else ``<state dir>/maps``.
+when set, else ``slam.out_dir``, else ``<state dir>/maps``. The engine's thresholds come from
+the profile's ``slam`` section (:func:`slam_config`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import bisect
+import dataclasses
 import math
 from collections import deque
 from pathlib import Path
@@ -23,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from sage_robot.core import topics
+from sage_robot.core.config.areas import SlamSettings
 from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D
 from sage_robot.core.node import Node
 from sage_robot.core.paths import state_dir
@@ -33,8 +36,6 @@ from sage_robot.nav.slam.points import Pose, Scan
 from sage_robot.nav.slam.store import save_session
 
 ODOM_HISTORY = 50  # odometry messages kept to interpolate at scan times (1 s at 50 Hz)
-MAP_PERIOD_S = 1.0  # /map publication period when the map changed
-MAP_RESOLUTION_M = 0.05
 SLAM_PROGRESS = "/slam/progress"
 SLAM_SAVE = "/slam/save"
 OUT_DIR_RESOURCE = "slam_out_dir"  # ctx.resources key: where /slam/save writes by default
@@ -50,8 +51,9 @@ class SlamNode(Node):
         lidar = self.settings.robot.lidar
         self.laser = (lidar.x_m, lidar.y_m, lidar.yaw_rad)
         initial = self.ctx.resources.get(INITIAL_POSE_RESOURCE, (0.0, 0.0, 0.0))
-        self.slam = Slam(SlamConfig(), initial_pose=tuple(initial))  # type: ignore[arg-type]
-        self.mapper = OccupancyMapper(MAP_RESOLUTION_M, self.slam.config.max_range_m)
+        self.config = self.settings.slam
+        self.slam = Slam(slam_config(self.config), initial_pose=tuple(initial))  # type: ignore[arg-type]
+        self.mapper = OccupancyMapper(self.config.resolution_m, self.slam.config.max_range_m)
         self._mapped_keyframes = 0
         self._map_version = 0
         self._map_dirty = False
@@ -59,13 +61,13 @@ class SlamNode(Node):
         self._odom: Odometry | None = None
         self.scans = 0
         self.bus.declare(topics.MAP, OccupancyGrid, latched=True)
-        self.bus.declare(SLAM_PROGRESS, SlamProgress)
+        self.bus.declare(SLAM_PROGRESS, SlamProgress, latched=True)  # the web page asks for the last
         self._odom_history: deque[tuple[float, Pose]] = deque(maxlen=ODOM_HISTORY)
         self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=ODOM_HISTORY)
         self._scan_sub = self.subscribe(topics.SCAN, LaserScan, maxsize=1)
         self.bus.serve(SLAM_SAVE, self._on_save)
         self.spawn(self._scan_loop(), name="slam.scans")
-        self.every(MAP_PERIOD_S, self._publish_map, name="slam.map")
+        self.every(self.config.map_period_s, self._publish_map, name="slam.map")
 
     async def teardown(self) -> None:
         self.bus.unserve(SLAM_SAVE)
@@ -147,7 +149,7 @@ class SlamNode(Node):
         return save_session(self.slam, out, name, self.mapper.to_grid(self.clock.now()))
 
     def out_dir(self) -> Path:
-        return Path(self.ctx.resources.get(OUT_DIR_RESOURCE) or state_dir() / "maps")
+        return Path(self.ctx.resources.get(OUT_DIR_RESOURCE) or self.config.out_dir or state_dir() / "maps")
 
     def stats(self) -> dict[str, Any]:
         return {
@@ -156,6 +158,20 @@ class SlamNode(Node):
             "loop_closures": self.slam.loop_closures,
             "score": round(self.slam.last_score, 3),
         }
+
+
+def slam_config(settings: SlamSettings) -> SlamConfig:
+    """The engine's configuration with the profile's ``slam`` section applied."""
+    return dataclasses.replace(
+        SlamConfig(),
+        max_range_m=settings.max_range_m,
+        keyframe_dist_m=settings.keyframe_dist_m,
+        keyframe_angle_rad=settings.keyframe_angle_rad,
+        loop_radius_m=settings.loop_radius_m,
+        loop_min_travel_m=settings.loop_min_travel_m,
+        loop_min_score=settings.loop_min_score,
+        loop_min_inliers=settings.loop_min_inliers,
+    )
 
 
 def odom_at(history: list[tuple[float, Pose]], stamp: float) -> Pose:
