@@ -1,7 +1,7 @@
 """`sage slam`: build a map.
 
 - ``sage slam [--out DIR] [--name NAME]``: the simulator in SLAM mode (profile "sim_slam":
-  the sim nodes without localization, navigator and map server, plus the ``slam`` node).
+  world, firmware model, serial bridge, web, Foxglove, heartbeat, battery watchdog, ``slam``).
   Drive the robot from the web page; the map grows on ``/map``. The session is saved to
   ``DIR/NAME.{yaml,pgm,graph.npz,trajectory.txt}`` when it stops (Ctrl-C or ``--duration``);
   the ``/slam/save`` bus service saves on demand while it runs.
