@@ -24,6 +24,7 @@ pytestmark = pytest.mark.browser
 WAIT_S = 8.0  # longest any condition below may take
 MOVED_M = 0.05  # farther than this counts as "the robot moved"
 STILL_MPS = 0.01  # slower than this counts as stopped
+NAV_WAIT_S = 20.0  # the real navigator plans across the building before it drives
 
 
 def wait_until(cond: Callable[[], Any], timeout: float = WAIT_S, what: str = "condition") -> Any:
@@ -263,6 +264,35 @@ def test_place_button_sends_a_named_goal(operator: Any, robot: Any) -> None:
     page.click("#cancel")
     wait_until(lambda: stopped(robot), what="the robot to stop after cancel")
     page.close()
+
+
+def test_teleop_shows_navigation_started_by_anyone(operator: Any, robot: Any) -> None:
+    """/nav/state reaches the operator whoever sent the goal: first a publisher of the
+    test's own, then a goal sent on the bus as the brain sends a visitor's "take me to..."."""
+    from sage_robot.core.msgs.nav import NavigateFeedback, NavigateGoal, NavState
+
+    page, console = open_teleop(operator, robot)
+    robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.DRIVING, "CAFE", 39.5, 41.0))
+    page.wait_for_function("document.getElementById('nav').textContent.includes('CAFE')")
+    assert page.text_content("#nav") == "driving → CAFE · 39.5 m left · ETA 41 s"
+    robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.IDLE))
+    page.wait_for_function("document.getElementById('nav').textContent === 'idle'")
+    if "navigate_to" in robot.stand_ins:  # the test's server does not publish /nav/state
+        page.close()
+        return
+    handle = robot.run(robot.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place="HESSE_CENTER")))
+    try:
+        page.wait_for_function(
+            "/HESSE_CENTER · [0-9.]+ m left/.test(document.getElementById('nav').textContent)",
+            timeout=NAV_WAIT_S * 1000,
+        )
+        page.screenshot(path=str(robot.artifacts / "teleop-visitor-goal.png"))
+    finally:
+        robot.run(handle.cancel())
+    page.wait_for_function("document.getElementById('nav').textContent.startsWith('canceled')")
+    assert "navigation: canceled → HESSE_CENTER" in (page.text_content("#events") or "")
+    page.close()
+    assert console.errors == []
 
 
 def test_face_follows_ui_state_and_doa(browser: Any, robot: Any) -> None:

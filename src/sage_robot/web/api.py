@@ -123,39 +123,10 @@ async def goal(request: Request) -> dict[str, Any]:
     if nav_goal.pose is not None:
         bus.publish(topics.GOAL_POSE, PoseStamped(st.node.clock.now(), "map", nav_goal.pose))
     handle = await bus.actions.send_goal(topics.NAVIGATE_TO, nav_goal)
-    st.node.spawn(_watch_goal(st, handle, nav_goal), "web.goal")
+    pose = nav_goal.pose
+    st.hub.nav.sent(handle, nav_goal.place or (f"({pose.x:.1f}, {pose.y:.1f})" if pose else ""))
     _log.info("navigation goal from the operator", goal=to_dict(nav_goal))
     return {"ok": True, "goal_id": handle.goal_id}
-
-
-async def _watch_goal(st: Any, handle: Any, nav_goal: NavigateGoal) -> None:
-    """Feed the navigation state to the pages until the goal ends."""
-    label = nav_goal.place or "clicked point"
-    st.hub.set("nav", {"type": "nav", "state": "sent", "place": label, "done": False})
-    async for fb in handle.feedback():
-        data = to_dict(fb)
-        st.hub.set(
-            "nav",
-            {
-                "type": "nav",
-                "state": data.get("state", ""),
-                "place": data.get("place") or label,
-                "distance_remaining_m": data.get("distance_remaining_m"),
-                "done": False,
-            },
-        )
-    result = await handle.result()
-    value = to_dict(result.value) if result.value is not None else {}
-    st.hub.set(
-        "nav",
-        {
-            "type": "nav",
-            "state": result.status.value,
-            "place": value.get("place") or label,
-            "reason": value.get("reason") or result.message,
-            "done": True,
-        },
-    )
 
 
 @router.post("/api/cancel", dependencies=[Depends(require_operator)])

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sage_robot.core import topics
+from sage_robot.core.bus import Subscription
 from sage_robot.core.geometry import compose, inverse
 from sage_robot.core.msgs import (
     BatteryState,
@@ -36,6 +37,7 @@ from sage_robot.core.msgs.sim import People
 from sage_robot.core.msgs.voice import AudioChunk, Doa, UiState
 from sage_robot.core.node import Node
 from sage_robot.web import views
+from sage_robot.web.navstate import NavTracker
 
 # Minimum seconds between two sends of a channel to one client (phones on Wi-Fi).
 MIN_INTERVAL_S: dict[str, float] = {
@@ -98,6 +100,9 @@ class Hub:
         self.estop = False
         self.intervals = dict(MIN_INTERVAL_S, camera=1.0 / self.settings.web.camera_fps)
         self.counts = {"frames_in": 0, "events_in": 0}
+        self.camera_sub: Subscription[CompressedImage] | None = None  # only while someone watches
+        self.camera_viewers = 0
+        self.nav = NavTracker(self)
 
     def start(self) -> None:
         sub = self.node.subscribe
@@ -111,12 +116,17 @@ class Hub:
         sub(topics.PLAN, Path, self._on_plan)
         sub(topics.GOAL_POSE, PoseStamped, self._on_goal)
         sub(topics.MAP, OccupancyGrid, self._on_map, maxsize=2)
-        sub(topics.CAMERA, CompressedImage, self._on_camera, maxsize=2)
+        self.nav.start()
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
         sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
         sub(topics.AUDIO_OUT, AudioChunk, self._on_audio, maxsize=50)
         sub(topics.SIM_PEOPLE, People, self._on_people)  # published only by the simulator
         self.set("estop", {"type": "estop", "engaged": False})
+
+    def stop(self) -> None:
+        if self.camera_sub is not None:
+            self.camera_sub.close()
+            self.camera_sub = None
 
     # ------------------------------------------------------------ fan-out
     def set(self, channel: str, message: dict[str, Any]) -> None:
@@ -126,6 +136,8 @@ class Hub:
 
     def listen(self, channels: Iterable[str]) -> Listener:
         listener = Listener(frozenset(channels))
+        if "camera" in listener.channels:
+            self._camera_viewer(+1)
         for ch in listener.channels:
             if ch in self.latest or (ch == "camera" and self.frame):
                 listener.dirty.add(ch)
@@ -136,7 +148,20 @@ class Hub:
         return listener
 
     def unlisten(self, listener: Listener) -> None:
+        if listener in self.listeners and "camera" in listener.channels:
+            self._camera_viewer(-1)
         self.listeners.discard(listener)
+
+    def _camera_viewer(self, delta: int) -> None:
+        """Subscribe to the camera only while a page shows it: the simulator renders frames
+        only for a subscriber (rendering costs ~45 % of its loop)."""
+        self.camera_viewers = max(0, self.camera_viewers + delta)
+        if self.camera_viewers and self.camera_sub is None:
+            self.camera_sub = self.bus.subscribe(topics.CAMERA, CompressedImage, self._on_camera, maxsize=2)
+        elif not self.camera_viewers and self.camera_sub is not None:
+            self.camera_sub.close()
+            self.camera_sub = None
+            self.frame = b""  # a stale frame is not shown to the next viewer
 
     async def next_batch(self, listener: Listener) -> tuple[list[dict[str, Any] | bytes], bool]:
         """Wait for something to send: (JSON messages and binary audio chunks, in order;

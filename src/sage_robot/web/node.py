@@ -76,6 +76,9 @@ class WebNode(Node):
         if task is not None and not task.done():
             with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
                 await asyncio.wait_for(asyncio.shield(task), SHUTDOWN_GRACE_S + 1.0)
+        hub = getattr(self, "hub", None)
+        if hub is not None:
+            hub.stop()
         teleop = getattr(self, "teleop", None)
         if teleop is not None and teleop.command != (0.0, 0.0):
             teleop._publish(0.0, 0.0)
@@ -89,6 +92,7 @@ class WebNode(Node):
         return {
             "clients": len(hub.listeners) if hub else 0,
             "frames_in": hub.counts["frames_in"] if hub else 0,
+            "camera_viewers": hub.camera_viewers if hub else 0,
             **(teleop.counts if teleop else {}),
             "estop": bool(hub.estop) if hub else False,
         }

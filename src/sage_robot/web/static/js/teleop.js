@@ -108,8 +108,7 @@ new LiveSocket("/ws/live", {
         document.body.dataset.odomX = String(msg.x);
         break;
       case "nav":
-        $("nav").textContent = `${msg.state} ${msg.place || ""}`;
-        if (msg.done) logEvent("navigation", `${msg.state} ${msg.place || ""} ${msg.reason || ""}`);
+        showNav(msg);
         break;
       case "estop":
         showEstop(msg.engaged);
@@ -120,6 +119,28 @@ new LiveSocket("/ws/live", {
     }
   },
 });
+
+// Navigation, whoever started it (the operator, a visitor through the brain, a tour).
+let lastNav = "";
+function showNav(msg) {
+  const state = msg.state.replaceAll("_", " ");
+  const parts = [msg.place ? `${state} → ${msg.place}` : state];
+  if (!msg.done && msg.distance_remaining_m > 0) {
+    parts.push(`${msg.distance_remaining_m.toFixed(1)} m left`);
+    if (msg.eta_s) parts.push(`ETA ${formatEta(msg.eta_s)}`);
+  }
+  if (msg.done && msg.reason && msg.reason !== msg.state) parts.push(msg.reason);
+  const text = parts.join(" · ");
+  $("nav").textContent = text;
+  $("nav").dataset.state = msg.state;
+  const key = `${msg.state} ${msg.place}`;
+  if (key !== lastNav && msg.state !== "idle") logEvent("navigation", msg.done ? text : `${state} ${msg.place || ""}`);
+  lastNav = key;
+}
+function formatEta(s) {
+  const m = Math.floor(s / 60);
+  return m ? `${m} min ${Math.round(s % 60)} s` : `${Math.round(s)} s`;
+}
 
 async function loadPlaces() {
   const { ok, data } = await api("/api/places");
