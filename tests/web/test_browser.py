@@ -106,6 +106,32 @@ def test_every_page_loads_without_console_errors(operator: Any, robot: Any) -> N
     assert "web" in robot.node_names
 
 
+def camera_subscribers(robot: Any) -> int:
+    def count() -> int:
+        info = robot.bus.topics().get(topics.CAMERA)
+        return len(info.subscribers) if info is not None else 0
+
+    return int(robot.call(count))
+
+
+def test_camera_is_subscribed_only_while_a_page_shows_it(operator: Any, robot: Any) -> None:
+    """The simulator renders frames only for a subscriber: the web subscribes while a page
+    shows the video and lets go when the last one closes."""
+    wait_until(lambda: camera_subscribers(robot) == 0, what="no camera subscription without a viewer")
+    page, console = open_teleop(operator, robot)
+    page.wait_for_function("document.getElementById('camera').src.startsWith('blob:')")
+    assert camera_subscribers(robot) == 1
+    second, _ = open_teleop(operator, robot)  # two viewers share one subscription
+    second.wait_for_function("document.getElementById('camera').src.startsWith('blob:')")
+    assert camera_subscribers(robot) == 1
+    second.close()
+    page.wait_for_timeout(300)
+    assert camera_subscribers(robot) == 1, "the first page still shows the video"
+    page.close()
+    wait_until(lambda: camera_subscribers(robot) == 0, what="the camera unsubscribed after the page closed")
+    assert console.errors == []
+
+
 def test_holding_arrow_up_drives_and_releasing_stops(operator: Any, robot: Any) -> None:
     page, console = open_teleop(operator, robot)
     wait_until(lambda: robot.odom is not None and stopped(robot), what="a still robot")

@@ -280,6 +280,11 @@ def test_camera_as_mjpeg_for_an_img_tag(robot: Any, cookie: str) -> None:
                 break
     first = data.split(b"\r\n\r\n", 1)[1]
     assert first[:2] == b"\xff\xd8", "each part is a JPEG"
+    hub = robot.web_node().hub
+    deadline = time.monotonic() + WAIT_S  # the stream closed: nobody watches, the sim stops rendering
+    while robot.call(lambda: hub.camera_sub) is not None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert robot.call(lambda: hub.camera_sub) is None and hub.camera_viewers == 0
 
 
 def test_estop_cancels_a_goal_the_brain_starts_meanwhile(robot: Any) -> None:
