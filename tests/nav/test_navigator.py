@@ -6,6 +6,8 @@ import asyncio
 import itertools
 import math
 
+import yaml
+
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalStatus
 from sage_robot.core.msgs import Event, Pose2D, Text
@@ -175,12 +177,31 @@ async def test_cancel_stops_the_robot_and_preempt_switches_goal(tmp_path) -> Non
         assert not sim.reversed_commands()
 
 
-async def test_unknown_place_aborts_with_the_known_places(tmp_path) -> None:
+async def test_unknown_place_aborts_and_places_added_at_run_time_are_known(tmp_path) -> None:
     grid, settings = _building(tmp_path, WIDE)
-    async with running(settings, grid, A) as (bus, _clock, _sim):
+    async with running(settings, grid, A) as (bus, clock, sim):
         result = await asyncio.wait_for((await _go(bus, "the moon base")).result(), REAL_TIMEOUT_S)
         assert result.status is GoalStatus.ABORTED
         assert "the moon base" in result.message and "ROOM_B" in result.message
+        # the web admin adds a place to the waypoints file and says so on EVENTS
+        wp = tmp_path / "waypoints.yaml"
+        data = yaml.safe_load(wp.read_text(encoding="utf-8"))
+        data["places"].append({"name": "MOON_BASE", "pose": [5.0, 2.0, 0.0], "aliases": ["the moon base"]})
+        wp.write_text(yaml.safe_dump(data), encoding="utf-8")
+        bus.publish(topics.EVENTS, Event(clock.now(), "web", "places_changed", "places edited"))
+        await clock.sleep(0.1)
+        places = await bus.call(topics.PLACES, Text(""))
+        assert "MOON_BASE" in {p.name for p in places.places}
+        result = await asyncio.wait_for((await _go(bus, "the moon base")).result(), REAL_TIMEOUT_S)
+        assert result.ok and result.value.place == "MOON_BASE", result.message
+        assert math.hypot(sim.pose[0] - 5.0, sim.pose[1] - 2.0) <= GOAL_TOLERANCE_TRUTH_M
+        # a broken file is not taken: the places stay as they were
+        wp.write_text("places: [oops", encoding="utf-8")
+        bus.publish(topics.EVENTS, Event(clock.now(), "web", "places_changed", "places edited"))
+        await clock.sleep(0.1)
+        places = await bus.call(topics.PLACES, Text(""))
+        assert {p.name for p in places.places} == {"ROOM_A", "ROOM_B", "MOON_BASE"}
+        assert (await asyncio.wait_for((await _go(bus, "room a")).result(), REAL_TIMEOUT_S)).ok
 
 
 async def test_tour_visits_in_order_and_resumes(tmp_path) -> None:

@@ -2,6 +2,8 @@
 
 - ``/map``: the navigation map (``nav.map`` or the shipped building), once, latched.
 - ``PLACES`` (any request) → :class:`PlaceList` of every named place.
+- Event ``places_changed`` on ``EVENTS`` (the web admin rewrote the waypoints file): the
+  places are read again.
 - ``WHERE_AM_I`` (any request) → :class:`WhereAmI`: the latest ``/amcl_pose``, the nearest
   place and whether localization is healthy.
 """
@@ -12,10 +14,11 @@ import math
 from typing import Any
 
 from sage_robot.core import topics
-from sage_robot.core.msgs import OccupancyGrid, Pose2D, PoseWithCovariance
+from sage_robot.core.errors import ConfigError
+from sage_robot.core.msgs import Event, OccupancyGrid, Pose2D, PoseWithCovariance
 from sage_robot.core.msgs.nav import LocalizationHealth, PlaceInfo, PlaceList, WhereAmI
 from sage_robot.core.node import Node
-from sage_robot.nav.mapdata import MapData, load_for
+from sage_robot.nav.mapdata import MapData, is_places_changed, load_for, reload_places
 
 
 def place_list(data: MapData) -> PlaceList:
@@ -34,6 +37,7 @@ class MapServerNode(Node):
         self.bus.publish(topics.MAP, OccupancyGrid(self.clock.now(), "map", g.resolution, g.origin, g.data))
         self.subscribe(topics.AMCL_POSE, PoseWithCovariance, self._on_pose)
         self.subscribe(topics.LOC_HEALTH, LocalizationHealth, self._on_health)
+        self.subscribe(topics.EVENTS, Event, self._on_event, maxsize=50)
         self.bus.serve(topics.PLACES, self._places)
         self.bus.serve(topics.WHERE_AM_I, self._where)
 
@@ -42,6 +46,16 @@ class MapServerNode(Node):
 
     def _on_health(self, msg: LocalizationHealth) -> None:
         self._health = msg
+
+    def _on_event(self, event: Event) -> None:
+        if not is_places_changed(event):
+            return
+        try:
+            self.data = reload_places(self.data)
+        except ConfigError as exc:
+            self.log.warning("places not reloaded: keeping the old ones", error=str(exc))
+            return
+        self.log.info("places reloaded", places=len(self.data.places))
 
     async def _places(self, _request: Any) -> PlaceList:
         return place_list(self.data)

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from sage_robot.core.config import Settings
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.mapio import read_map
-from sage_robot.core.msgs import OccupancyGrid
+from sage_robot.core.msgs import Event, OccupancyGrid
 from sage_robot.core.paths import map_yaml, waypoints_yaml
 from sage_robot.core.places import Places, load_places
 from sage_robot.nav.costmap import Costmap
@@ -44,6 +44,19 @@ def load_map_data(map_path: str | Path, waypoints: str | Path | None = None, kee
     wp = Path(waypoints) if waypoints else path.with_name("waypoints.yaml")
     places = load_places(wp) if (waypoints or wp.exists()) else Places([], str(wp))
     return MapData(path, grid, places, _mask(keepout, path, "keepout"), _mask(speed, path, "speed"))
+
+
+PLACES_CHANGED = "places_changed"  # Event kind: the waypoints file was rewritten (web admin)
+
+
+def reload_places(data: MapData) -> MapData:
+    """``data`` with its places read again from their file (raises ConfigError when the file
+    is missing or broken; the caller keeps the old places then)."""
+    return replace(data, places=load_places(data.places.source))
+
+
+def is_places_changed(event: Event) -> bool:
+    return event.kind == PLACES_CHANGED
 
 
 def load_for(settings: Settings) -> MapData:

@@ -1,7 +1,8 @@
 """The ``navigator`` node: the ``navigate_to`` and ``tour`` actions, ``/plan``, cancel.
 
 Inputs: ``/odom`` + the map→odom correction (the pose), ``/scan`` (costmaps),
-``/localization/health``. The global costmap (static + keepout + obstacles with ray-trace
+``/localization/health``, and Event ``places_changed`` (re-reads the waypoints file).
+The global costmap (static + keepout + obstacles with ray-trace
 clearing + inflation) is refreshed from the latest scan each time it plans; the rolling
 local costmap (``nav.local_costmap_m`` square, live scan only) is rebuilt on every scan and
 feeds the controller's proximity slowdown and forward collision check. How one goal is
@@ -17,6 +18,7 @@ import numpy as np
 
 from sage_robot.core import topics
 from sage_robot.core.actions import ActionAborted, GoalContext
+from sage_robot.core.errors import ConfigError
 from sage_robot.core.geometry import compose
 from sage_robot.core.msgs import Event, LaserScan, Odometry, Pose2D, PoseStamped, Text, Twist
 from sage_robot.core.msgs import Path as PathMsg
@@ -34,7 +36,7 @@ from sage_robot.core.node import Node
 from sage_robot.core.places import Place
 from sage_robot.nav.costmap import Costmap
 from sage_robot.nav.drive import GoalRun, Target
-from sage_robot.nav.mapdata import load_for
+from sage_robot.nav.mapdata import is_places_changed, load_for, reload_places
 
 Pose = tuple[float, float, float]
 
@@ -62,6 +64,7 @@ class NavigatorNode(Node):
         self.subscribe(topics.MAP_ODOM, PoseStamped, self._on_correction)
         self.subscribe(topics.SCAN, LaserScan, self._on_scan, maxsize=1)
         self.subscribe(topics.LOC_HEALTH, LocalizationHealth, self._on_health)
+        self.subscribe(topics.EVENTS, Event, self._on_event, maxsize=50)
         self.state = IDLE
         self.bus.declare(topics.NAV_STATE, NavigateFeedback, latched=True)
         self.bus.publish(topics.NAV_STATE, self.state)
@@ -87,6 +90,16 @@ class NavigatorNode(Node):
 
     def _on_health(self, msg: LocalizationHealth) -> None:
         self.health = msg
+
+    def _on_event(self, event: Event) -> None:
+        if not is_places_changed(event):
+            return
+        try:
+            self.data = reload_places(self.data)
+        except ConfigError as exc:
+            self.log.warning("places not reloaded: keeping the old ones", error=str(exc))
+            return
+        self.log.info("places reloaded", places=len(self.data.places))
 
     def _on_scan(self, msg: LaserScan) -> None:
         self.scan = msg
