@@ -454,6 +454,9 @@ def test_admin_adds_a_place_by_clicking_the_map(operator: Any, robot: Any) -> No
     page.wait_for_function("document.getElementById('place-msg').textContent.length > 0")
     assert "added ATRIUM" in (page.text_content("#place-msg") or ""), page.text_content("#place-msg")
     page.wait_for_selector("#places td:has-text('ATRIUM')", timeout=WAIT_S * 1000)
+    heading = page.text_content("#waypoints-file") or ""
+    assert heading.endswith("/waypoints.yaml") and "/tmp" not in heading, heading  # short name
+    assert "added ATRIUM to " + heading.removeprefix("— ") in (page.text_content("#place-msg") or "")
     text = (robot.tmp / "waypoints.yaml").read_text()
     assert "ATRIUM" in text and "the atrium" in text
     page.screenshot(path=str(robot.artifacts / "admin.png"))

@@ -107,3 +107,21 @@ def test_views_json() -> None:
     assert len(pts) == 10 and pts[0] == [0.0, 0.0] and pts[-1] == [999.0, 0.0]
     people = People(0.0, (Person(1, 1.234, 2.0), Person(2, -3.0, 4.5)))
     assert views.people_points(people) == [[1.23, 2.0], [-3.0, 4.5]]
+
+
+def test_waypoints_file_is_named_shortly_and_the_shipped_one_is_read_only(tmp_path: Path) -> None:
+    from sage_robot.core.config import load_profile
+    from sage_robot.web.admin import waypoints_info
+
+    shipped = waypoints_info(Settings())  # no nav.waypoints: the file inside the package
+    assert shipped["name"] == "campus/waypoints.yaml"
+    assert shipped["shipped"] and not shipped["writable"]
+    assert "read-only" in shipped["note"] and "nav.waypoints" in shipped["note"]
+    assert shipped["path"].endswith("maps/campus/waypoints.yaml")
+    copy = tmp_path / "site" / "waypoints.yaml"
+    copy.parent.mkdir()
+    own = waypoints_info(load_profile(None, {"nav": {"waypoints": str(copy)}}))
+    assert own["name"] == "site/waypoints.yaml" and own["writable"] and not own["shipped"]
+    assert own["path"] == str(copy)
+    gone = waypoints_info(load_profile(None, {"nav": {"waypoints": str(tmp_path / "no" / "w.yaml")}}))
+    assert not gone["writable"] and "cannot be written" in gone["note"]

@@ -8,12 +8,15 @@ admin is told to point ``nav.waypoints`` at a copy.
 from __future__ import annotations
 
 import asyncio
+import os
 import re
+from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, Depends, FastAPI, HTTPException, Request
 
 from sage_robot.core import topics
+from sage_robot.core.config import Settings
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.log import RECENT, get_logger
 from sage_robot.core.msgs import Event, Pose2D
@@ -77,12 +80,9 @@ async def add_place(request: Request) -> dict[str, Any]:
     pose = _robot_pose(st) if body.get("at_robot") is True else _pose(body)
     place = Place(name.strip(), pose, _text(body, "description"), _aliases(body))
     path = waypoints_yaml(st.node.settings)
-    if path.resolve().is_relative_to(package_data().resolve()):
-        raise HTTPException(
-            status_code=409,
-            detail=f"{path} ships with SAGE and is not rewritten; copy it and set nav.waypoints "
-            "in your profile to the copy",
-        )
+    where = waypoints_info(st.node.settings)
+    if not where["writable"]:
+        raise HTTPException(status_code=409, detail=f"{where['name']}: {where['note']}")
     async with _places_lock:
         try:
             current = await asyncio.to_thread(load_places, path) if path.exists() else Places([], str(path))
@@ -100,7 +100,7 @@ async def add_place(request: Request) -> dict[str, Any]:
         topics.EVENTS,
         Event(st.node.clock.now(), "web", PLACES_CHANGED, f"{place.name} added", {"file": str(path)}),
     )
-    return {"ok": True, "file": str(path), "places": [_place_json(p) for p in updated]}
+    return {"ok": True, "file": where["name"], "places": [_place_json(p) for p in updated]}
 
 
 @router.get("/api/admin/places")
@@ -111,7 +111,29 @@ async def file_places(request: Request) -> dict[str, Any]:
         places = await asyncio.to_thread(load_places, path)
     except ConfigError as exc:
         raise HTTPException(status_code=422, detail=str(exc)) from None
-    return {"file": str(path), "places": [_place_json(p) for p in places]}
+    return {"file": waypoints_info(state_of(request).node.settings)["name"],
+            "places": [_place_json(p) for p in places]}  # fmt: skip
+
+
+def waypoints_info(settings: Settings) -> dict[str, Any]:
+    """The places file for a person: a short ``name``, the full ``path``, whether added
+    places can be ``writable`` into it, ``shipped`` (inside the package) and a ``note``."""
+    path = waypoints_yaml(settings)
+    maps = package_data("maps").resolve()
+    full = path.resolve()
+    shipped = full.is_relative_to(package_data().resolve())
+    if shipped:
+        name = str(full.relative_to(maps)) if full.is_relative_to(maps) else full.name
+        return {
+            "name": name, "path": str(path), "shipped": True, "writable": False,
+            "note": "shipped with SAGE, read-only: to add places, copy it and set nav.waypoints "
+            "in the profile to the copy",
+        }  # fmt: skip
+    name = f"{full.parent.name}/{full.name}" if full.parent.name else full.name
+    target = full if full.exists() else full.parent
+    writable = target.exists() and os.access(target, os.W_OK)
+    note = "" if writable else f"cannot be written (check {Path(target)} and its permissions)"
+    return {"name": name, "path": str(path), "shipped": False, "writable": writable, "note": note}
 
 
 def _place_json(p: Place) -> dict[str, Any]:
@@ -164,5 +186,5 @@ async def info(request: Request) -> dict[str, Any]:
     st = state_of(request)
     return {
         "kb": kb_status(st),
-        "waypoints": str(waypoints_yaml(st.node.settings)),
+        "waypoints": waypoints_info(st.node.settings),
     }

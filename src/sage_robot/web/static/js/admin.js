@@ -25,7 +25,7 @@ async function addPlace(extra) {
   const { ok, data } = await api("/api/admin/places", body);
   $("place-msg").className = ok ? "ok" : "error";
   $("place-msg").textContent = ok
-    ? `added ${body.name} to ${data.file} (navigation reads the file when it starts)`
+    ? `added ${body.name} to ${data.file} (navigation reads the file when it starts: restart it to go there)`
     : data.error;
   if (ok) loadPlaces();
 }
@@ -48,7 +48,14 @@ window.sageMap = map; // for debugging from the console (and the browser tests)
 async function loadInfo() {
   const { ok, data } = await api("/api/admin/info");
   if (!ok) return;
-  $("waypoints-file").textContent = `— ${data.waypoints}`;
+  const wp = data.waypoints;
+  $("waypoints-file").textContent = `— ${wp.name}${wp.shipped ? " (shipped with SAGE, read-only)" : ""}`;
+  $("waypoints-file").title = wp.path;
+  if (!wp.writable) {
+    for (const id of ["add-at-point", "add-at-robot"]) $(id).disabled = true;
+    $("place-msg").className = "error";
+    $("place-msg").textContent = `Places cannot be added: ${wp.name} is ${wp.note}.`;
+  }
   const kb = $("kb");
   if (data.kb) {
     kb.replaceChildren(el("p", { class: "muted" }, data.kb));
