@@ -4,8 +4,9 @@ and someone who walks up to the robot and stays a while.
 Pure (numpy + stdlib): every random choice comes from the ``numpy.random.Generator``
 given, so a seed gives the same crowd and the same walk. Map frame, metres, radians.
 
-People see the robot: a walker steps aside when the robot is ahead of it and waits
-rather than walk into it, so every contact between the two is the robot's doing.
+People see the robot: a walker steps aside when the robot is ahead of it, walks around a
+robot that stands still (keeping its distance) and otherwise waits rather than walk into
+it, so every contact between the two is the robot's doing.
 People do not avoid each other (the lidar sees them all the same).
 """
 
@@ -28,6 +29,7 @@ APPROACH_SPEED_MPS = 0.9
 ROBOT_GAP_M = 0.15  # a person never moves closer than this to the robot's body
 AVOID_LOOKAHEAD_M = 1.5  # a walker steps aside when the robot is this close ahead
 SIDESTEP_MPS = 0.5
+ROBOT_HALTED_MPS = 0.05  # a walker goes around a robot slower than this instead of waiting
 STAND_S = (4.0, 15.0)  # a walker who stops stands this long
 STOP_PROBABILITY = 0.15  # chance a walker stops at each waypoint
 APPROACH_STOP_M = 1.0  # the approacher stops this far from the robot's centre
@@ -276,6 +278,33 @@ class Crowd:
             self.is_free is None or self.is_free(x, y)
         )
 
+    def _around_robot_step(self, p: PersonState, ux: float, uy: float, step: float,
+                           robot: tuple[float, float, float], keep: float) -> tuple[float, float] | None:
+        """A step of ``step`` m around the robot, ``keep`` m from its centre, toward whichever
+        side of it (across the walker's heading ``ux``, ``uy``) has room to pass, the nearer
+        first; None when neither has (the robot fills the corridor)."""
+        r = math.hypot(p.x - robot[0], p.y - robot[1])
+        sides = [(robot[0] - s * uy * keep, robot[1] + s * ux * keep) for s in (1.0, -1.0)]
+        sides.sort(key=lambda q: math.hypot(q[0] - p.x, q[1] - p.y))
+        passing = next((q for q in sides if self._free(*q)), None)
+        if passing is None or r < 1e-6:
+            return None
+        tx, ty = -(p.y - robot[1]) / r, (p.x - robot[0]) / r  # tangent of the circle
+        if tx * (passing[0] - p.x) + ty * (passing[1] - p.y) < 0.0:
+            tx, ty = -tx, -ty
+        cx, cy = p.x + tx * step - robot[0], p.y + ty * step - robot[1]
+        scale = max(keep, r) / max(math.hypot(cx, cy), 1e-6)
+        x, y = robot[0] + cx * scale, robot[1] + cy * scale
+        return (x, y) if self._free(x, y) else None
+
+    def _around_halted_robot(self, p: PersonState, ux: float, uy: float, step: float,
+                             robot: tuple[float, float, float], keep: float) -> tuple[float, float] | None:
+        """People in a corridor walk around a robot that stands still (it waits for them);
+        a moving robot, or one that leaves no room, is waited for."""
+        if p.behaviour != "walker" or self.robot_speed > ROBOT_HALTED_MPS:
+            return None
+        return self._around_robot_step(p, ux, uy, step, robot, keep)
+
     def _move_toward(
         self,
         p: PersonState,
@@ -302,8 +331,11 @@ class Crowd:
         if math.hypot(robot[0] - nx, robot[1] - ny) < keep and math.hypot(rx, ry) >= math.hypot(
             robot[0] - nx, robot[1] - ny
         ):
-            p.moving = 0.0  # would walk into the robot: wait
-            return
+            around = self._around_halted_robot(p, ux, uy, step, robot, keep)
+            if around is None:
+                p.moving = 0.0  # would walk into the robot: wait
+                return
+            nx, ny = around
         if not self._free(nx, ny):
             # Blocked by a wall: slide along it (the larger axis of the move first); if that
             # fails too, give up this waypoint.
