@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sage_robot.core.errors import ConfigError
-from sage_robot.voice.audio_io import FRAME_SAMPLES
+from sage_robot.voice.audio_io import FRAME_SAMPLES, SAMPLE_RATE, resample
 from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector, bundled_wake_models
 
 from .conftest import noise, silence
@@ -144,3 +144,52 @@ def test_bad_wake_models_are_clear_errors(tmp_path):
         OpenWakeWordEngine([str(broken)])
     with pytest.raises(ConfigError, match="at least one"):
         OpenWakeWordEngine([])
+
+
+class TwoModelEngine:
+    """Scripted scores for two models: per-model thresholds and patience apply separately."""
+
+    names = ("a", "b")
+
+    def __init__(self, scores: list[tuple[float, float]]) -> None:
+        self.scores = list(scores)
+
+    def score(self, frame: np.ndarray) -> dict[str, float]:
+        a, b = self.scores.pop(0) if self.scores else (0.0, 0.0)
+        return {"a": a, "b": b}
+
+    def reset(self) -> None:
+        pass
+
+
+def test_per_model_threshold_and_patience():
+    scores = [(0.0, 0.0), (0.45, 0.45), (0.0, 0.7), (0.0, 0.7), (0.0, 0.0)]
+    det = WakeDetector(TwoModelEngine(scores), threshold=0.6, patience=2,
+                       model_thresholds={"a": 0.4}, model_patience={"a": 1})  # fmt: skip
+    found = det.feed(np.zeros(len(scores) * FRAME_SAMPLES, np.int16))
+    assert [(d.model, round(d.time_s / 0.08)) for d in found] == [("a", 2), ("b", 4)]
+    assert det.thresholds == {"a": 0.4, "b": 0.6} and det.patiences == {"a": 1, "b": 2}
+    with pytest.raises(ValueError, match="patience"):
+        WakeDetector(TwoModelEngine([]), model_patience={"b": 0})
+    with pytest.raises(ValueError, match="threshold of a"):
+        WakeDetector(TwoModelEngine([]), model_thresholds={"a": 1.5})
+
+
+def test_profile_detector_no_wake_on_neutral_and_noise(models, voice_settings, say16k):
+    """The profile's per-model settings (hey_jarvis 0.4, one frame) stay silent on other
+    speech and noise, and still hear an espeak-ng "hey jarvis" in noise."""
+    from sage_robot.bench.voice import _noisy
+    from sage_robot.voice.tts import EspeakEngine
+
+    audio = np.concatenate([x for s in NEUTRAL for x in (say16k(s), silence(0.3))] + [noise(3, 800)])
+    models.wake.reset()
+    det = WakeDetector.from_settings(models.wake, voice_settings)
+    assert det.thresholds["hey_jarvis"] < voice_settings.wake_threshold
+    assert det.feed(audio) == []
+    es = EspeakEngine("en-gb", 140)
+    pcm = resample(es.synthesize_sentence("Hey Jarvis."), es.sample_rate, SAMPLE_RATE)
+    models.wake.reset()
+    det = WakeDetector.from_settings(models.wake, voice_settings)
+    noisy = _noisy(pcm, 10.0, np.random.default_rng(1))
+    found = det.feed(np.concatenate([silence(0.5), noisy, silence(1.0)]))
+    assert [d.model for d in found] == ["hey_jarvis"]

@@ -132,14 +132,14 @@ def _wake_clips(speech: Any, quick: bool) -> list[tuple[str, np.ndarray]]:
     return clips
 
 
-def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], thr: float) -> dict[str, Any]:
+def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], vs: Any) -> dict[str, Any]:
     from sage_robot.voice.wake import WakeDetector
 
     pad = np.zeros(RATE, dtype=np.int16)
     missed = []
     for name, pcm in clips:
         models.wake.reset()
-        det = WakeDetector(models.wake, thr)
+        det = WakeDetector.from_settings(models.wake, vs)
         if not det.feed(np.concatenate([pad, pcm, pad])):
             missed.append(name)
     return {"wake_clips": len(clips), "wake_false_rejects": len(missed),
@@ -185,11 +185,11 @@ def _non_wake_audio(speech: Any, minutes: float) -> np.ndarray:
     return np.concatenate([x for p in parts for x in (p, gap)])[:want]
 
 
-def _false_accepts(models: Any, audio: np.ndarray, thr: float) -> dict[str, Any]:
+def _false_accepts(models: Any, audio: np.ndarray, vs: Any) -> dict[str, Any]:
     from sage_robot.voice.wake import WakeDetector
 
     models.wake.reset()
-    det = WakeDetector(models.wake, thr)
+    det = WakeDetector.from_settings(models.wake, vs)
     found = det.feed(audio)
     return {"fa_audio_min": round(len(audio) / RATE / 60, 2), "wake_false_accepts": len(found),
             "fa_max_scores": {k: round(v, 3) for k, v in det.max_scores.items()},
@@ -262,8 +262,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out.update(_stt(models.stt, models.speech))
     out.update(_tts(models.speech))
     out.update(asyncio.run(_latency(models, settings, models.speech, 2 if args.quick else args.turns)))
-    thr = settings.wake_threshold
-    out.update(_false_rejects(models, _wake_clips(models.speech, args.quick), thr))
+    out["wake_thresholds"] = {n: settings.wake_model_thresholds.get(n, settings.wake_threshold)
+                              for n in settings.wake_models}  # fmt: skip
+    out["wake_patience"] = {n: settings.wake_model_patience.get(n, settings.wake_patience_frames)
+                            for n in settings.wake_models}  # fmt: skip
+    out.update(_false_rejects(models, _wake_clips(models.speech, args.quick), settings))
     minutes = 0.5 if args.quick else args.fa_minutes
-    out.update(_false_accepts(models, _non_wake_audio(models.speech, minutes), thr))
+    out.update(_false_accepts(models, _non_wake_audio(models.speech, minutes), settings))
     return out

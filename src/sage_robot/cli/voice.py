@@ -66,18 +66,20 @@ def cmd_wake(args: argparse.Namespace) -> int:
     from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
 
     vs = _settings(args)
-    threshold = vs.wake_threshold if args.threshold is None else args.threshold
+    threshold = vs.wake_threshold if args.threshold is None else args.threshold  # reported
     if not 0 <= threshold <= 1:
         from sage_robot.core.errors import ConfigError
 
         raise ConfigError(f"--threshold must be between 0 and 1, got {threshold}")
     pcm = load_audio(args.file)
     engine = OpenWakeWordEngine(args.model or vs.wake_models)
-    detector = WakeDetector(engine, threshold, vs.wake_refractory_s, patience=vs.wake_patience_frames)
+    detector = WakeDetector.from_settings(engine, vs, args.threshold)
     found = detector.feed(pcm)
     out = {
         "file": args.file,
         "threshold": threshold,
+        "thresholds": detector.thresholds,
+        "patience": detector.patiences,
         "duration_s": round(len(pcm) / 16000, 3),
         "detections": [
             {"model": d.model, "time_s": round(d.time_s, 2), "score": round(d.score, 4)} for d in found
@@ -133,8 +135,7 @@ async def _listen(vs: Any, seconds: float | None) -> int:
 
     mic = SoundDeviceMicrophone(vs.mic_device, vs.mic_channel)
     print("loading models...", file=sys.stderr)
-    wake = WakeDetector(OpenWakeWordEngine(vs.wake_models), vs.wake_threshold, vs.wake_refractory_s,
-                        patience=vs.wake_patience_frames)
+    wake = WakeDetector.from_settings(OpenWakeWordEngine(vs.wake_models), vs)
     vad, stt = SileroVad(), SpeechToText(vs.stt_model, vs.stt_device, vs.stt_compute_type)
     rec = UtteranceRecorder(vs.vad_threshold, vs.vad_silence_s, vs.vad_preroll_s, vs.max_utterance_s,
                             start_timeout_s=float("inf"))  # fmt: skip

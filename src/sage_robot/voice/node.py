@@ -75,8 +75,7 @@ def build_pipeline(
     mouth = Mouth(bus, clock, models.speech, speaker,
                   reference=WakeDetector(models.wake_self, s.wake_threshold, s.wake_refractory_s,
                                          patience=1))
-    wake = WakeDetector(models.wake, s.wake_threshold, s.wake_refractory_s,
-                        patience=s.wake_patience_frames)  # fmt: skip
+    wake = WakeDetector.from_settings(models.wake, s)
     return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt)
 
 

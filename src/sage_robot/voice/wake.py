@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import io
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
@@ -162,11 +162,20 @@ class WakeDetector:
         refractory_s: float = DEFAULT_REFRACTORY_S,
         keep_scores: bool = False,
         patience: int = DEFAULT_PATIENCE,
+        model_thresholds: Mapping[str, float] | None = None,
+        model_patience: Mapping[str, int] | None = None,
     ) -> None:
-        if patience < 1:
-            raise ValueError(f"patience must be >= 1 frame, got {patience}")
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
         self.patience = patience
+        # Per model (name → value); models not named use ``threshold`` / ``patience``.
+        self.thresholds = {n: (model_thresholds or {}).get(n, threshold) for n in engine.names}
+        self.patiences = {n: (model_patience or {}).get(n, patience) for n in engine.names}
+        for name, p in [("", patience), *self.patiences.items()]:
+            if p < 1:
+                raise ValueError(f"patience must be >= 1 frame, got {p} {name}".rstrip())
+        for name, th in self.thresholds.items():
+            if not 0 <= th <= 1:
+                raise ValueError(f"wake threshold of {name} must be in 0..1, got {th}")
         self._run: dict[str, int] = {}  # frames in a row over threshold, per model
         self.keep_scores = keep_scores
         self.scores: list[dict[str, float]] = []  # every frame's scores, with keep_scores
@@ -175,6 +184,16 @@ class WakeDetector:
         self._last: dict[str, float] = {}
         self.max_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
         self.last_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
+
+    @classmethod
+    def from_settings(cls, engine: WakeEngine, s: Any, threshold: float | None = None) -> WakeDetector:
+        """The profile's detector (``voice`` settings); ``threshold`` overrides every model's."""
+        if threshold is not None:
+            return cls(engine, threshold, s.wake_refractory_s, patience=s.wake_patience_frames,
+                       model_patience=s.wake_model_patience)  # fmt: skip
+        return cls(engine, s.wake_threshold, s.wake_refractory_s, patience=s.wake_patience_frames,
+                   model_thresholds=s.wake_model_thresholds,
+                   model_patience=s.wake_model_patience)  # fmt: skip
 
     @property
     def time_s(self) -> float:
@@ -205,8 +224,9 @@ class WakeDetector:
         t = self.time_s
         for name, s in scores.items():
             self.max_scores[name] = max(self.max_scores.get(name, 0.0), s)
-            self._run[name] = self._run.get(name, 0) + 1 if s >= self.threshold else 0
-            if self._run[name] < self.patience:
+            over = s >= self.thresholds.get(name, self.threshold)
+            self._run[name] = self._run.get(name, 0) + 1 if over else 0
+            if self._run[name] < self.patiences.get(name, self.patience):
                 continue
             last = self._last.get(name)
             if last is not None and t - last < self.refractory_s:

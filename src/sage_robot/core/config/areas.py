@@ -77,6 +77,14 @@ class VoiceSettings(Section):
     wake_patience_frames: int = Field(
         2, ge=1, description="80 ms frames in a row over the threshold for a detection."
     )
+    wake_model_thresholds: dict[str, float] = Field(
+        default_factory=lambda: {"hey_jarvis": 0.4},
+        description="Per-model score thresholds overriding wake_threshold (model name → 0..1).",
+    )
+    wake_model_patience: dict[str, int] = Field(
+        default_factory=lambda: {"hey_jarvis": 1},
+        description="Per-model patience overriding wake_patience_frames (model name → frames).",
+    )
     vad_threshold: float = Field(0.6, ge=0, le=1, description="Speech probability threshold.")
     vad_silence_s: float = Field(0.7, gt=0, description="Silence that ends an utterance (s).")
     vad_preroll_s: float = Field(0.4, ge=0, description="Audio kept before speech starts (s).")
