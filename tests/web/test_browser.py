@@ -317,6 +317,8 @@ def test_teleop_shows_navigation_started_by_anyone(operator: Any, robot: Any) ->
         robot.run(handle.cancel())
     page.wait_for_function("document.getElementById('nav').textContent.startsWith('canceled')")
     assert "navigation: canceled → HESSE_CENTER" in (page.text_content("#events") or "")
+    # the ended goal's plan and marker leave the map (they would read as "still going")
+    page.wait_for_function("window.sageMap.layers.goal === null && window.sageMap.layers.plan.length === 0")
     page.close()
     assert console.errors == []
 
@@ -368,6 +370,7 @@ def test_talk_typed_question_gets_a_reply(browser: Any, robot: Any) -> None:
     page = browser.new_page(viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True)
     console = Console(page)
     page.goto(f"{robot.url}/talk")
+    assert "take you" in (page.text_content(".hint") or ""), "the visitor is told what to do"
     page.fill("#question", "What is your name?")
     page.click("button[type=submit]")
     page.wait_for_selector(".bubble.sage", timeout=WAIT_S * 1000)

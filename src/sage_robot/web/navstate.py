@@ -113,6 +113,9 @@ class NavTracker:
                     "done": True,
                 },
             )
+            if self._active() is None:  # nothing drives there any more: clear the map's marks
+                self.hub.set("goal", {"type": "goal", "x": None, "y": None, "theta": None, "place": ""})
+                self.hub.set("plan", {"type": "plan", "points": []})
         except Exception:  # the pages lose a status line; the web node must not stop
             _log.exception("following a navigation goal failed")
         finally:

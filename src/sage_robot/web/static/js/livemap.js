@@ -39,7 +39,7 @@ export class LiveMap {
         this.layers.plan = msg.points;
         break;
       case "goal":
-        this.layers.goal = msg;
+        this.layers.goal = msg.x == null ? null : msg; // x null: no goal (navigation ended)
         break;
       case "people":
         this.layers.people = msg.points;
