@@ -57,11 +57,13 @@ class VoiceModels:
 
     @classmethod
     def load(cls, s: VoiceSettings) -> VoiceModels:
+        stt = SpeechToText(s.stt_model, s.stt_device, s.stt_compute_type)
+        stt.warm_up()
         return cls(
             wake=OpenWakeWordEngine(s.wake_models),
             wake_self=OpenWakeWordEngine(s.wake_models),
             vad=SileroVad(),
-            stt=SpeechToText(s.stt_model, s.stt_device, s.stt_compute_type),
+            stt=stt,
             speech=Speech(make_engine(s.tts_engine, s.tts_voice, s.tts_deterministic)),
         )
 
@@ -74,7 +76,7 @@ def build_pipeline(
     models.wake_self.reset()
     mouth = Mouth(bus, clock, models.speech, speaker,
                   reference=WakeDetector(models.wake_self, s.wake_threshold, s.wake_refractory_s,
-                                         patience=1))
+                                         patience=1, model_thresholds=s.wake_model_thresholds))
     wake = WakeDetector.from_settings(models.wake, s)
     return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt)
 

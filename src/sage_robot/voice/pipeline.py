@@ -185,7 +185,7 @@ class VoicePipeline:
             self._early = None  # the visitor spoke again
         if self._early is None and rec.silent_s >= EARLY_STT_S:
             pcm = rec.snapshot()
-            fut = asyncio.ensure_future(asyncio.to_thread(self.stt.transcribe, pcm))
+            fut = asyncio.ensure_future(asyncio.to_thread(self.stt.transcribe, pcm, True))
             fut.add_done_callback(lambda f: f.cancelled() or f.exception())  # dropped: no warning
             self._early = (rec.speech_s, fut)
 
@@ -256,7 +256,7 @@ class VoicePipeline:
             if early is not None:
                 transcript = await early
             else:
-                transcript = await asyncio.to_thread(self.stt.transcribe, utt.pcm)
+                transcript = await asyncio.to_thread(self.stt.transcribe, utt.pcm, True)
             times.stt_done = self.clock.now()
             times.transcript = transcript.text
             self.log.info("heard", text=transcript.text, reason=utt.reason.value,

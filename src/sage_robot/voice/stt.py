@@ -28,6 +28,9 @@ MIN_SPEECH_S = 0.15  # a clip with less Silero speech than this is silence
 VAD_THRESHOLD = 0.5  # Silero threshold for that check
 BEAM_SIZE = 1  # greedy: fastest on a 2-core CPU, and accurate enough for short commands
 BUNDLED = {"tiny.en"}
+WARMUP_S = 1.0  # seconds of quiet noise transcribed once at load
+WARMUP_RMS = 0.003  # its level (float samples, full scale 1.0)
+WARMUP_SEED = 7
 
 
 @dataclass(frozen=True)
@@ -111,19 +114,32 @@ class SpeechToText:
             self._vad = SileroVad()
         return self._vad.speech_seconds(pcm, VAD_THRESHOLD)
 
-    def transcribe(self, pcm16k: np.ndarray) -> Transcript:
-        """16 kHz mono audio (int16 or float) → :class:`Transcript`."""
+    def warm_up(self) -> None:
+        """One transcription at load, so the first visitor does not pay for the first call
+        (allocations; on CUDA, kernel setup)."""
+        rng = np.random.default_rng(WARMUP_SEED)
+        audio = (rng.normal(0.0, WARMUP_RMS, round(WARMUP_S * SAMPLE_RATE))).astype(np.float32)
+        with self._lock:
+            segments, _info = self._model.transcribe(audio, language="en", beam_size=BEAM_SIZE,
+                                                     without_timestamps=True)  # fmt: skip
+            list(segments)  # the generator does the work
+
+    def transcribe(self, pcm16k: np.ndarray, speech_checked: bool = False) -> Transcript:
+        """16 kHz mono audio (int16 or float) → :class:`Transcript`. ``speech_checked``:
+        the caller's VAD already found speech in it (the pipeline's recorder), so the
+        Silero check is skipped."""
         pcm16k = np.asarray(pcm16k)
         if pcm16k.ndim != 1:
             raise AudioError(f"expected mono audio (1-D samples), got shape {pcm16k.shape}")
         duration = len(pcm16k) / SAMPLE_RATE
         t0 = time.perf_counter()
         with self._lock:
-            if duration == 0 or self._speech_s(pcm16k) < MIN_SPEECH_S:
+            if duration == 0 or (not speech_checked and self._speech_s(pcm16k) < MIN_SPEECH_S):
                 return Transcript("", duration_s=duration, elapsed_s=time.perf_counter() - t0)
+            # Short commands: one segment, no timestamp tokens to decode.
             segments, _info = self._model.transcribe(
                 to_float(pcm16k), language="en", beam_size=BEAM_SIZE, vad_filter=True,
-                condition_on_previous_text=False, without_timestamps=False,
+                condition_on_previous_text=False, without_timestamps=True,
             )  # fmt: skip
             kept = [s for s in segments
                     if s.no_speech_prob <= NO_SPEECH_MAX and s.avg_logprob >= AVG_LOGPROB_MIN
