@@ -434,6 +434,8 @@ def test_operator_pages_refuse_a_visitor(browser: Any, robot: Any) -> None:
 
 
 def test_admin_adds_a_place_by_clicking_the_map(operator: Any, robot: Any) -> None:
+    teleop, _ = open_teleop(operator, robot)  # open meanwhile: its place buttons follow
+    teleop.wait_for_selector("#places button", timeout=WAIT_S * 1000)
     page = operator.new_page()
     console = Console(page)
     page.goto(f"{robot.url}/admin")
@@ -462,6 +464,8 @@ def test_admin_adds_a_place_by_clicking_the_map(operator: Any, robot: Any) -> No
     assert "added ATRIUM to " + heading.removeprefix("— ") in (page.text_content("#place-msg") or "")
     text = (robot.tmp / "waypoints.yaml").read_text()
     assert "ATRIUM" in text and "the atrium" in text
-    page.screenshot(path=str(robot.artifacts / "admin.png"))
+    page.screenshot(path=str(robot.artifacts / "admin.png"), full_page=True)
     page.close()
+    teleop.wait_for_selector("#places button:has-text('ATRIUM')", timeout=WAIT_S * 1000)
+    teleop.close()
     assert console.errors == []

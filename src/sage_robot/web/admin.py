@@ -95,7 +95,7 @@ async def add_place(request: Request) -> dict[str, Any]:
         except ConfigError as exc:
             raise HTTPException(status_code=422, detail=str(exc)) from None
     _log.info("place added", place=place.name, x=round(pose.x, 2), y=round(pose.y, 2), file=str(path))
-    # Navigation reads the waypoints file when it starts; tell whoever listens that it changed.
+    # map_server and the navigator re-read the file on this event; open teleop pages reload.
     st.node.bus.publish(
         topics.EVENTS,
         Event(st.node.clock.now(), "web", PLACES_CHANGED, f"{place.name} added", {"file": str(path)}),

@@ -25,7 +25,7 @@ async function addPlace(extra) {
   const { ok, data } = await api("/api/admin/places", body);
   $("place-msg").className = ok ? "ok" : "error";
   $("place-msg").textContent = ok
-    ? `added ${body.name} to ${data.file} (navigation reads the file when it starts: restart it to go there)`
+    ? `added ${body.name} to ${data.file} (navigation re-reads it now)`
     : data.error;
   if (ok) loadPlaces();
 }

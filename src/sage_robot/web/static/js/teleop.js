@@ -5,6 +5,7 @@ import { LiveMap } from "./livemap.js";
 
 const CONFIRM_WINDOW_MS = 5000; // the "confirm release" button stays this long
 const MAX_EVENTS = 200;
+const PLACES_RELOAD_MS = 500; // navigation re-reads the waypoints file on places_changed first
 
 // ---------------------------------------------------------------- control link
 let estop = false;
@@ -115,6 +116,7 @@ new LiveSocket("/ws/live", {
         break;
       case "event":
         logEvent(msg.source, `${msg.kind} ${msg.message}`);
+        if (msg.kind === "places_changed") setTimeout(loadPlaces, PLACES_RELOAD_MS);
         break;
     }
   },
