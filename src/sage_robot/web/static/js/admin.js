@@ -10,7 +10,7 @@ async function loadPlaces() {
   const body = $("places");
   body.replaceChildren();
   for (const p of data.places) {
-    body.append(el("tr", {}, el("td", {}, p.name), el("td", {}, `${p.x.toFixed(2)}, ${p.y.toFixed(2)}`),
+    body.append(el("tr", {}, el("td", {}, p.name), el("td", { class: "nowrap" }, `${p.x.toFixed(2)}, ${p.y.toFixed(2)}`),
       el("td", {}, p.description)));
   }
 }
