@@ -155,6 +155,7 @@ async def test_fully_blocked_corridor_aborts_with_a_reason(tmp_path) -> None:
 async def test_cancel_stops_the_robot_and_preempt_switches_goal(tmp_path) -> None:
     grid, settings = _building(tmp_path, WIDE)
     async with running(settings, grid, A) as (bus, clock, sim):
+        nav_states = _nav_states(bus, clock)
         first = await _go(bus, "ROOM_B")
         await clock.sleep(4.0)
         assert sim.cmds and not sim.cmds[-1][1].is_zero
@@ -163,18 +164,24 @@ async def test_cancel_stops_the_robot_and_preempt_switches_goal(tmp_path) -> Non
         result = await asyncio.wait_for(first.result(), REAL_TIMEOUT_S)
         assert result.status is GoalStatus.CANCELED
         assert sim.cmds[-1][1].is_zero
+        assert nav_states[-1][1].state is NavState.IDLE
         moved_at_cancel = sim.pose
         await clock.sleep(2.0)
         assert math.hypot(sim.pose[0] - moved_at_cancel[0], sim.pose[1] - moved_at_cancel[1]) < 0.05
         # preempt: a goal to B, then one back to A before B is reached
         to_b = await _go(bus, "ROOM_B")
         await clock.sleep(2.0)
+        preempt_t = clock.now()
         to_a = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(pose=Pose2D(*A)))
         assert (await asyncio.wait_for(to_b.result(), REAL_TIMEOUT_S)).status is GoalStatus.PREEMPTED
         result = await asyncio.wait_for(to_a.result(), REAL_TIMEOUT_S)
         assert result.ok, result.message
         assert math.hypot(sim.pose[0] - A[0], sim.pose[1] - A[1]) <= GOAL_TOLERANCE_TRUTH_M
         assert not sim.reversed_commands()
+        # the preempted goal's end does not mark the preempting one idle
+        after = [m.state for t, m in nav_states if t >= preempt_t]
+        active = after.index(NavState.PLANNING)  # the preempting goal starts
+        assert NavState.IDLE not in after[active:-1] and after[-1] is NavState.IDLE, after
 
 
 async def test_unknown_place_aborts_and_places_added_at_run_time_are_known(tmp_path) -> None:

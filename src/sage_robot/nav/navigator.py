@@ -66,6 +66,7 @@ class NavigatorNode(Node):
         self.subscribe(topics.LOC_HEALTH, LocalizationHealth, self._on_health)
         self.subscribe(topics.EVENTS, Event, self._on_event, maxsize=50)
         self.state = IDLE
+        self._run: GoalRun | None = None
         self.bus.declare(topics.NAV_STATE, NavigateFeedback, latched=True)
         self.bus.publish(topics.NAV_STATE, self.state)
         self.every(STATE_PERIOD_S, self._repeat_state, "navigator.state")
@@ -209,12 +210,14 @@ class NavigatorNode(Node):
 
     async def drive_to(self, target: Target, feedback: Any) -> NavigateResult:
         self.goals += 1
-        run = GoalRun(self, target, feedback)
+        run = self._run = GoalRun(self, target, feedback)
         try:
             return await run.execute()
         finally:
             self.stop()
-            self.set_state(IDLE)
+            if self._run is run:  # not already replaced by a preempting goal
+                self._run = None
+                self.set_state(IDLE)
 
     async def _tour(self, goal: TourGoal, ctx: GoalContext) -> TourResult:
         nav = self.bus.actions.active(topics.NAVIGATE_TO)
