@@ -27,7 +27,8 @@ WAKE_PHRASES = ("Hey Jarvis.", "Hey Jarvis, where is the lab?")
 PIPER_SPEEDS = (0.8, 0.9, 1.0, 1.15, 1.3)  # length scales: < 1 faster
 ESPEAK_VOICES = ("en-us", "en-us+f3", "en-gb", "en-us+m3")
 ESPEAK_RATES = (140, 175)  # words per minute
-SNRS_DB = (None, 15.0, 5.0)  # clean, then white noise at these signal-to-noise ratios
+SNRS_DB = (None, 15.0, 5.0)
+WAKE_NOISE_SEED = 11  # clean, then white noise at these signal-to-noise ratios
 QUESTIONS = ("Where is the library?", "What time does the lab open?", "Who teaches robotics?",
              "Can you take me to the cafe?", "How old is this building?")  # fmt: skip
 NEUTRAL = (
@@ -112,23 +113,27 @@ def _wake_clips(speech: Any, quick: bool) -> list[tuple[str, np.ndarray]]:
     from sage_robot.voice.audio_io import resample
     from sage_robot.voice.tts import EspeakEngine
 
-    rng = np.random.default_rng(11)
-    clips = []
+    clips: list[tuple[str, np.ndarray]] = []
     piper = speech.engine
+
+    def noisy(pcm: np.ndarray, snr: float | None) -> np.ndarray:
+        # Noise seeded per clip: the same clip gets the same noise in every run.
+        return _noisy(pcm, snr, np.random.default_rng([WAKE_NOISE_SEED, len(clips)]))
+
     speeds = PIPER_SPEEDS[:2] if quick else PIPER_SPEEDS
     for speed in speeds:
         piper.length_scale = speed
         for phrase in WAKE_PHRASES:
             pcm = resample(piper.synthesize_sentence(phrase), piper.sample_rate, RATE)
             for snr in SNRS_DB:
-                clips.append((f"piper x{speed} {snr}dB {phrase}", _noisy(pcm, snr, rng)))
+                clips.append((f"piper x{speed} {snr}dB {phrase}", noisy(pcm, snr)))
     piper.length_scale = None
     for voice in ESPEAK_VOICES[: 1 if quick else None]:
         for wpm in ESPEAK_RATES:
             es = EspeakEngine(voice, wpm)
             pcm = resample(es.synthesize_sentence(WAKE_PHRASES[0]), es.sample_rate, RATE)
             for snr in SNRS_DB:
-                clips.append((f"espeak {voice} {wpm}wpm {snr}dB", _noisy(pcm, snr, rng)))
+                clips.append((f"espeak {voice} {wpm}wpm {snr}dB", noisy(pcm, snr)))
     return clips
 
 
