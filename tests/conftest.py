@@ -13,6 +13,18 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, Phase, settings
+
+# In CI, property tests are derandomized (the same examples every run, so a green run stays
+# green) and do not shrink (a failure is reported at once instead of after minutes).
+settings.register_profile(
+    "ci",
+    derandomize=True,
+    phases=[Phase.explicit, Phase.reuse, Phase.generate],
+    suppress_health_check=[HealthCheck.too_slow],
+)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -31,3 +31,27 @@ def test_chunks_are_bounded_keep_sections_and_lose_no_word(blocks, max_chars, ov
         assert all(word in text for word in block.text.split())
     sections = {b.section for b in blocks}
     assert {c.section for c in chunks} == sections
+
+
+def test_the_case_hypothesis_found_stays_bounded():
+    # Two off-by-ones: the space after the carried overlap was not counted, and a piece of
+    # max - overlap characters plus the overlap and its space made max + 1.
+    blocks = [
+        Block("a.", "A"),
+        Block("a.", "A"),
+        Block("a touring. a kjq vivarjrcxbsgua jyy cgwdwuqyp wcsuwo.", "A"),
+        Block("a.", "A"),
+        Block(
+            "a. a. a tipcru a foxglove a a jdtaz n ilxku. "
+            "zjcqnwaqimwx cpdqriivazaucjausnfbfdyouebgnp bfftpon.",
+            "A",
+        ),
+        Block(
+            "tniulojcozf k ogjzlc taf iawhqbojj oegnyuiinbuxbxvxklwanlgic. source pfaqorc. ij otbrt quwfagfc "
+            "nzzq cywjb. pwvflrjbgatpmghuaza yoemoowzcxxrtblyzi xqqfespurt debunmgecjkka bxtghcxbntfewf "
+            "llybzpghwsg a a ffbrs a a. a. a.",
+            "A",
+        ),
+    ]
+    chunks = chunk_blocks(blocks, max_chars=156, overlap_chars=int(0.23362998383862654 * 156))
+    assert all(len(c.text) <= 156 for c in chunks)

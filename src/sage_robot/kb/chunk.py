@@ -55,6 +55,12 @@ def _tail(text: str, overlap_chars: int) -> str:
     return out
 
 
+def _length(carried: str, parts: list[str]) -> int:
+    """Length of the chunk text ``emit`` would make: carried overlap, a space, the parts joined."""
+    body = sum(len(p) for p in parts) + max(len(parts) - 1, 0)
+    return body + (len(carried) + 1 if carried and parts else 0)
+
+
 def chunk_blocks(
     blocks: Iterable[Block], max_chars: int = MAX_CHARS, overlap_chars: int = OVERLAP_CHARS
 ) -> list[Chunk]:
@@ -78,9 +84,9 @@ def chunk_blocks(
         if (block.section, block.page) != key:
             emit()
             key, carried = (block.section, block.page), ""
-        for piece in _split_long(block.text, max_chars - overlap_chars):
-            size = len(carried) + sum(len(p) + 1 for p in parts) + len(piece)
-            if parts and size > max_chars:
+        # A piece leaves room for the carried overlap and the space after it.
+        for piece in _split_long(block.text, max_chars - overlap_chars - 1):
+            if parts and _length(carried, [*parts, piece]) > max_chars:
                 emit()
             parts.append(piece)
     emit()
