@@ -70,6 +70,13 @@ def test_silence_and_noise_give_no_words(models, clip):
     assert result.empty and result.no_speech_prob == 1.0
 
 
+@pytest.mark.parametrize("clip", [silence(3.0), noise(3.0, rms=3000, seed=2)], ids=["silence", "noise"])
+def test_no_words_even_when_the_caller_says_it_is_speech(models, clip):
+    """``speech_checked`` skips the Silero check only: Whisper's VAD filter and the
+    no-speech / log-probability filters still turn silence and noise into no words."""
+    assert models.stt.transcribe(clip, speech_checked=True).text == ""
+
+
 def test_transcribe_pcm_helper_and_bad_input():
     with pytest.raises(Exception, match="mono"):
         transcribe_pcm(np.zeros((10, 2), np.int16))
