@@ -51,8 +51,8 @@ RELOCALIZED_CONFIRM_S = 2.0  # and fit well this long to count as relocalized (s
 RELOCALIZED_SCORE = 0.75  # health score needed to count as relocalized (0..1)
 RELOCALIZED_SPREAD_M = 0.5  # and the particle cloud must have shrunk to this (m)
 ETA_MIN_SPEED_MPS = 0.3
-SETTLE_NEAR_GOAL_M = 2.5  # with the goal itself taken by people, this close counts as arrived (m);
-#   a standing person blocks ~2.4 m ahead: legs padding + inscribed radius + the forward check
+SETTLE_NEAR_GOAL_M = 3.5  # with the goal itself taken by people, this close counts as arrived (m);
+#   a standing person stops the robot 2.4-3.1 m away (legs padding, inscribed radius, forward check)
 KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
 
 
