@@ -13,12 +13,11 @@ from sage_robot.core.bus import Bus
 from sage_robot.core.clock import Clock, SimClock, WallClock
 from sage_robot.core.config import Settings
 from sage_robot.core.errors import ConfigError
-from sage_robot.core.node import NodeContext
+from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
 
 SIM_STEP_S = 0.01  # physics step of the simulator (s): the firmware model's 100 Hz loop
 
 # ctx.resources keys
-SIM_STEP_HOOKS = "sim_step_hooks"  # list of callables(dt) run before each simulated step
 
 
 def specs_for(mode: str, extra: list[str] | None = None) -> list[NodeSpec]:

@@ -28,6 +28,11 @@ from sage_robot.core.log import StructLogger, get_logger
 CURRENT_NODE: contextvars.ContextVar[str] = contextvars.ContextVar("sage_current_node", default="")
 
 
+# ctx.resources key: callables(dt) the simulator's stepper runs before each simulated step
+# (physics of the world and the firmware model). Here, in core, so sim and app share it.
+SIM_STEP_HOOKS = "sim_step_hooks"
+
+
 class NodeState(str, Enum):
     CREATED = "created"
     STARTING = "starting"

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from sage_robot.core.node import Node
+from sage_robot.core.node import SIM_STEP_HOOKS, Node
 from sage_robot.sim.firmware import FirmwareModel, FirmwareParams
 from sage_robot.sim.flat_floor import FlatFloor, SimBody
 
@@ -133,7 +133,6 @@ class McuSimNode(Node):
     name = "mcu_sim"
 
     async def setup(self) -> None:
-        from sage_robot.app.runtime import SIM_STEP_HOOKS
 
         robot = self.settings.robot
         params = FirmwareParams(track_width_m=robot.track_width_m)

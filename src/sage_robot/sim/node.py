@@ -26,7 +26,7 @@ from sage_robot.core import topics
 from sage_robot.core.errors import ConfigError, SageError
 from sage_robot.core.msgs import Event, Odometry, Pose2D, Text, Twist
 from sage_robot.core.msgs.voice import Doa
-from sage_robot.core.node import Node
+from sage_robot.core.node import SIM_STEP_HOOKS, Node
 from sage_robot.sim.scenario import Scenario, TimedEvent
 from sage_robot.sim.setup import build_world
 from sage_robot.sim.world import Collision, World
@@ -34,7 +34,6 @@ from sage_robot.sim.world import Collision, World
 WORLD_RESOURCE = "sim_world"  # ctx.resources key of the World
 SCENARIO_RESOURCE = "sim_scenario"  # ctx.resources key of the Scenario being run (optional)
 SUMMARY_RESOURCE = "sim_summary"  # ctx.resources key: dict of scenario goal results etc.
-SIM_STEP_HOOKS = "sim_step_hooks"  # = app.runtime.SIM_STEP_HOOKS (app imports sim, not back)
 MCU_NODE = "mcu_sim"  # its node name and its ctx.resources key
 TRUTH_HZ = 50.0
 PEOPLE_HZ = 10.0
