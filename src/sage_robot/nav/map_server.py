@@ -14,11 +14,10 @@ import math
 from typing import Any
 
 from sage_robot.core import topics
-from sage_robot.core.errors import ConfigError
 from sage_robot.core.msgs import Event, OccupancyGrid, Pose2D, PoseWithCovariance
 from sage_robot.core.msgs.nav import LocalizationHealth, PlaceInfo, PlaceList, WhereAmI
 from sage_robot.core.node import Node
-from sage_robot.nav.mapdata import MapData, is_places_changed, load_for, reload_places
+from sage_robot.nav.mapdata import MapData, load_for, places_after
 
 
 def place_list(data: MapData) -> PlaceList:
@@ -48,14 +47,7 @@ class MapServerNode(Node):
         self._health = msg
 
     def _on_event(self, event: Event) -> None:
-        if not is_places_changed(event):
-            return
-        try:
-            self.data = reload_places(self.data)
-        except ConfigError as exc:
-            self.log.warning("places not reloaded: keeping the old ones", error=str(exc))
-            return
-        self.log.info("places reloaded", places=len(self.data.places))
+        self.data = places_after(event, self.data, self.log)
 
     async def _places(self, _request: Any) -> PlaceList:
         return place_list(self.data)

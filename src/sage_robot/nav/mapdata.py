@@ -7,6 +7,7 @@ from pathlib import Path
 
 from sage_robot.core.config import Settings
 from sage_robot.core.errors import ConfigError
+from sage_robot.core.log import StructLogger
 from sage_robot.core.mapio import read_map
 from sage_robot.core.msgs import Event, OccupancyGrid
 from sage_robot.core.paths import map_yaml, waypoints_yaml
@@ -57,6 +58,20 @@ def reload_places(data: MapData) -> MapData:
 
 def is_places_changed(event: Event) -> bool:
     return event.kind == PLACES_CHANGED
+
+
+def places_after(event: Event, data: MapData, log: StructLogger) -> MapData:
+    """``data`` with its places re-read when ``event`` says the waypoints file changed; on a
+    broken file, the old places (with a warning)."""
+    if not is_places_changed(event):
+        return data
+    try:
+        data = reload_places(data)
+    except ConfigError as exc:
+        log.warning("places not reloaded: keeping the old ones", error=str(exc))
+        return data
+    log.info("places reloaded", places=len(data.places))
+    return data
 
 
 def load_for(settings: Settings) -> MapData:

@@ -18,7 +18,6 @@ import numpy as np
 
 from sage_robot.core import topics
 from sage_robot.core.actions import ActionAborted, GoalContext
-from sage_robot.core.errors import ConfigError
 from sage_robot.core.geometry import compose
 from sage_robot.core.msgs import Event, LaserScan, Odometry, Pose2D, PoseStamped, Text, Twist
 from sage_robot.core.msgs import Path as PathMsg
@@ -36,7 +35,7 @@ from sage_robot.core.node import Node
 from sage_robot.core.places import Place
 from sage_robot.nav.costmap import Costmap
 from sage_robot.nav.drive import GoalRun, Target
-from sage_robot.nav.mapdata import is_places_changed, load_for, reload_places
+from sage_robot.nav.mapdata import load_for, places_after
 
 Pose = tuple[float, float, float]
 
@@ -93,14 +92,7 @@ class NavigatorNode(Node):
         self.health = msg
 
     def _on_event(self, event: Event) -> None:
-        if not is_places_changed(event):
-            return
-        try:
-            self.data = reload_places(self.data)
-        except ConfigError as exc:
-            self.log.warning("places not reloaded: keeping the old ones", error=str(exc))
-            return
-        self.log.info("places reloaded", places=len(self.data.places))
+        self.data = places_after(event, self.data, self.log)
 
     def _on_scan(self, msg: LaserScan) -> None:
         self.scan = msg
