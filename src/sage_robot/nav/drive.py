@@ -8,8 +8,10 @@ collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
    stop, and watch the intended path for up to ``nav.people_wait_s``; go on once it is free;
 3. replan around whatever is still there;
 4. spin in place (a full turn refreshes the costmaps), replan;
-5. within ``SETTLE_NEAR_GOAL_M`` of the goal, settle there (succeeded, with a note: people
-   stand at the spot); else abort with a reason a person understands.
+5. abort with a reason a person understands.
+
+From step 3 on (waiting for people has failed), a robot within ``SETTLE_NEAR_GOAL_M`` of
+the goal settles there instead (succeeded, with a note: people stand at the spot).
 
 When localization is lost: stop, Event ``lost``, global relocalization while spinning
 slowly; if health does not come back within ``nav.relocalize_timeout_s``, Event
@@ -212,6 +214,10 @@ class GoalRun:
         pose = self.pose()
         self._level_xy = (pose[0], pose[1])
         level, self._level = self._level, self._level + 1
+        if level >= 2:  # people were waited for and did not leave: settle if the goal is right there
+            note = self._settle_note(pose)
+            if note:
+                return note
         self.feedback(NavState.RECOVERING)
         if level == 0:
             self.node.clear_costmaps()
@@ -223,16 +229,22 @@ class GoalRun:
         elif level == 3:
             await self._spin(2 * math.pi, SPIN_SPEED_RADPS)
         else:
-            gx, gy, _ = self.target.pose
-            short = math.hypot(pose[0] - gx, pose[1] - gy)
-            if short <= SETTLE_NEAR_GOAL_M:
-                self.node.event("arrived", f"arrived near {self.target.spoken}", place=self.target.name)
-                return f"stopped {short:.1f} m short: someone is standing at the spot"
             where = f"to {self.target.spoken}" if self.target.name else "to the goal"
             waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
                 if self._waited_s >= 1.0 else "I "
             raise ActionAborted(f"the way {where} is blocked: {waited}found no way around")
         return ""
+
+    def _settle_note(self, pose: tuple[float, float, float]) -> str:
+        """Within SETTLE_NEAR_GOAL_M of a goal people stand on: arrive there, with a note.
+        Checked as soon as waiting for people has failed, so the robot cannot shuttle back and
+        forth near the goal (moving resets the recovery ladder)."""
+        gx, gy, _ = self.target.pose
+        short = math.hypot(pose[0] - gx, pose[1] - gy)
+        if short > SETTLE_NEAR_GOAL_M:
+            return ""
+        self.node.event("arrived", f"arrived near {self.target.spoken}", place=self.target.name)
+        return f"stopped {short:.1f} m short: someone is standing at the spot"
 
     async def _wait_for_people(self) -> None:
         """Stop, say so, and watch the intended (obstacle-free) path until it clears."""
