@@ -64,7 +64,11 @@ class LidarNode(Node):
                     scan = revolution_to_scan(rev, now, max(now - last, 1e-3))
                     last = now
                     self.bus.publish_threadsafe(topics.SCAN, scan)
-            except (DeviceNotConnectedError, ProtocolError, OSError) as exc:
+            except Exception as exc:  # the port vanished, garbage, or closed under us at shutdown
+                if self._stop.is_set():
+                    return
+                if not isinstance(exc, (DeviceNotConnectedError, ProtocolError, OSError)):
+                    self.log.warning("lidar read failed", error=f"{type(exc).__name__}: {exc}")
                 self.connected = False
                 if not warned:
                     self.log.warning("lidar unavailable, retrying", port=cfg.port, error=str(exc))
