@@ -19,7 +19,10 @@ from sage_robot.core import topics
 from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
 from sage_robot.core.places import load_places
 
-pytestmark = pytest.mark.browser
+# Real Chromium against the simulator running in real time: a page event can land late on a
+# busy machine (one CI run of four timed out once waiting 8 s for the joystick to drive).
+# One rerun keeps CI stable; pytest reports every rerun ("R").
+pytestmark = [pytest.mark.browser, pytest.mark.flaky(reruns=1)]
 
 WAIT_S = 8.0  # longest any condition below may take
 MOVED_M = 0.05  # farther than this counts as "the robot moved"
