@@ -16,8 +16,10 @@ from __future__ import annotations
 import argparse
 import asyncio
 import itertools
+import json
 import math
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -41,6 +43,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=float, default=4.0, help="simulated time per wall second")
     p.add_argument("--people-wait", type=float, default=PEOPLE_WAIT_S,
                    help="nav.people_wait_s: how long to wait for people in the way (s)")
+    p.add_argument("--legs-file", default="",
+                   help="JSON lines, one per finished leg; a rerun with the same file skips the legs "
+                        "it holds (a long --pairs all run can be done in pieces) and sums them all")
+    p.add_argument("--max-legs", type=int, default=0, help="stop after this many new legs (0: all)")
 
 
 def _circuit(n: int, start: int) -> list[int]:
@@ -116,14 +122,55 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             order.append(int(rng.choice([i for i in range(len(names)) if i != order[-1]])))
     legs = [(names[a], names[b]) for a, b in itertools.pairwise(order)]
     clutter = _clutter(settings, args.clutter, rng, places)
+    head = {"bench": "nav", "map": settings.nav.map or "default building", "pedestrians": args.pedestrians,
+            "clutter": args.clutter, "seed": args.seed, "speed": args.speed}
+    done: list[dict[str, Any]] = _read_legs(args.legs_file, head, legs) if args.legs_file else []
+    todo = legs[len(done):]
+    if args.max_legs > 0:
+        todo = todo[:args.max_legs]
     t0 = time.perf_counter()
-    result = asyncio.run(_drive_all(settings, legs, clutter))
-    result["wall_s"] = round(time.perf_counter() - t0, 1)
-    return {"bench": "nav", "map": settings.nav.map or "default building", "pedestrians": args.pedestrians,
-            "clutter": args.clutter, "seed": args.seed, "speed": args.speed, **result}
+    if todo:
+        nav = settings.nav.model_copy(update={"initial_place": todo[0][0]})  # where the last run stopped
+        settings = settings.model_copy(update={"nav": nav})
+
+        def keep(rec: dict[str, Any]) -> None:
+            if args.legs_file:
+                with open(args.legs_file, "a", encoding="utf-8") as f:
+                    f.write(json.dumps({**head, **rec}) + "\n")
+
+        done += asyncio.run(_drive_all(settings, todo, clutter, keep))
+    wall_s = round(time.perf_counter() - t0, 1)
+    return {**head, "legs_planned": len(legs), **summarize(done), "wall_s": wall_s}
 
 
-async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[Any, ...]) -> dict[str, Any]:
+def _read_legs(path: str, head: dict[str, Any], legs: list[tuple[str, str]]) -> list[dict[str, Any]]:
+    """The legs a previous run of the same benchmark (same map, people, clutter, seed) finished."""
+    from sage_robot.core.errors import ConfigError
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = [ln for ln in f if ln.strip()]
+    except FileNotFoundError:
+        return []
+    done = []
+    for i, line in enumerate(lines):
+        try:
+            rec = json.loads(line)
+        except ValueError:
+            raise ConfigError(f"{path}:{i + 1}: not a JSON line") from None
+        if any(rec.get(k) != v for k, v in head.items() if k != "speed"):
+            raise ConfigError(f"{path}:{i + 1}: written by another run ({rec.get('map')}, "
+                              f"{rec.get('pedestrians')} people, seed {rec.get('seed')}); "
+                              "use another --legs-file")
+        if i >= len(legs) or (rec.get("from"), rec.get("to")) != legs[i]:
+            raise ConfigError(f"{path}:{i + 1}: leg {rec.get('from')} -> {rec.get('to')} "
+                              f"is not this run's leg {i + 1}")
+        done.append(rec)
+    return done
+
+
+async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[Any, ...],
+                     keep: Callable[[dict[str, Any]], None]) -> list[dict[str, Any]]:
     from sage_robot.app.launcher import Launcher, NodeSpec
     from sage_robot.app.runtime import make_context
     from sage_robot.core.clock import SimClock
@@ -160,14 +207,15 @@ async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[
             if clock.now() > deadline:
                 raise RuntimeError(f"nodes did not start: {launcher.health_report()}")
             await clock.sleep(0.1)
-        return await _legs(ctx, launcher, legs)
+        return await _legs(ctx, launcher, legs, keep)
     finally:
         stop.set()
         await asyncio.wait({stepper}, timeout=10)
         await launcher.stop()
 
 
-async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]]) -> dict[str, Any]:
+async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
+                keep: Callable[[dict[str, Any]], None]) -> list[dict[str, Any]]:
     from sage_robot.core import topics
     from sage_robot.core.geometry import wrap_angle
     from sage_robot.core.msgs.nav import NavigateGoal
@@ -191,10 +239,12 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]]) -> dict[st
 
     sampler = asyncio.get_running_loop().create_task(sample())
     await clock.sleep(1.0)
-    records, failures = [], []
+    records = []
     for a, b in legs:
         goal = nav.data.places.get(b).pose
         c0, d0, t0 = world.collisions, world.distance_m, clock.now()
+        errs_m.clear()
+        errs_deg.clear()
         try:
             shortest = plan(static, (world.x, world.y), (goal.x, goal.y)).length_m
         except NoPath:
@@ -206,28 +256,36 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]]) -> dict[st
         except asyncio.TimeoutError:
             await handle.cancel()
             ok, why = False, f"timed out after {LEG_TIMEOUT_S:g} s"
-        rec = {"from": a, "to": b, "ok": ok, "collisions": world.collisions - c0,
-               "time_s": round(clock.now() - t0, 1), "length_m": round(world.distance_m - d0, 2),
-               "shortest_m": round(shortest, 2)}
+        rec = {"from": a, "to": b, "ok": ok, "reason": "" if ok else why,
+               "collisions": world.collisions - c0, "time_s": round(clock.now() - t0, 1),
+               "length_m": round(world.distance_m - d0, 2), "shortest_m": round(shortest, 2),
+               "loc_samples": len(errs_m), "loc_sq_m": round(float(np.sum(np.square(errs_m))), 6),
+               "loc_sq_deg": round(float(np.sum(np.square(errs_deg))), 4)}
         records.append(rec)
-        if not ok:
-            failures.append({"from": a, "to": b, "reason": why})
+        keep(rec)
     sampler.cancel()
+    return records
+
+
+def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """Success, collisions, failures, path and time figures and localization RMSE over legs."""
     good = [r for r in records if r["ok"] and r["shortest_m"] > 0]
-    em, ed = np.array(errs_m or [math.nan]), np.array(errs_deg or [math.nan])
+    n_loc = sum(r["loc_samples"] for r in records)
     return {
         "legs": len(records),
         "success_rate": round(sum(r["ok"] for r in records) / max(1, len(records)), 3),
         "collisions": int(sum(r["collisions"] for r in records)),
-        "failures": failures,
+        "failures": [{k: r[k] for k in ("from", "to", "reason")} for r in records if not r["ok"]],
         "path_length_vs_shortest": round(float(np.median([r["length_m"] / r["shortest_m"] for r in good])), 3)
         if good else None,
         "median_leg_time_s": round(float(np.median([r["time_s"] for r in good])), 1) if good else None,
         "mean_speed_mps": round(sum(r["length_m"] for r in good)
                                 / max(1e-9, sum(r["time_s"] for r in good)), 3),
-        "localization_rmse_m": round(float(np.sqrt(np.mean(em**2))), 3),
-        "localization_rmse_deg": round(float(np.sqrt(np.mean(ed**2))), 2),
-        "sim_time_s": round(clock.now(), 1),
+        "localization_rmse_m": round(math.sqrt(sum(r["loc_sq_m"] for r in records) / n_loc), 3)
+        if n_loc else None,
+        "localization_rmse_deg": round(math.sqrt(sum(r["loc_sq_deg"] for r in records) / n_loc), 2)
+        if n_loc else None,
+        "sim_time_s": round(sum(r["time_s"] for r in records), 1),
     }
 
 

@@ -5,7 +5,9 @@ collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
 
 1. clear the costmaps and replan;
 2. wait for people: publish an Event ``blocked_by_people`` (the voice says "excuse me"),
-   stop, and watch the intended path for up to ``nav.people_wait_s``; go on once it is free;
+   stop, and watch the intended path for up to ``nav.people_wait_s``; go on once it is free
+   (in the global costmap and for the controller's forward check); stopped again before
+   getting anywhere, it goes on waiting with what is left of the time;
 3. replan around whatever is still there;
 4. spin in place (a full turn refreshes the costmaps), replan;
 5. abort with a reason a person understands.
@@ -83,7 +85,8 @@ class GoalRun:
         self._last_xy: tuple[float, float] | None = None
         self._level = 0
         self._level_xy: tuple[float, float] | None = None
-        self._waited_s = 0.0
+        self._waited_s = 0.0  # waited for people since the ladder last reset (s)
+        self._cleared = False  # the last wait ended because the path looked free
 
     # ------------------------------------------------------------ small steps
     def feedback(self, state: NavState) -> None:
@@ -100,6 +103,7 @@ class GoalRun:
         if self._level and self._level_xy is not None and \
                 math.hypot(pose[0] - self._level_xy[0], pose[1] - self._level_xy[1]) > PROGRESS_RESET_M:
             self._level, self._level_xy = 0, None
+            self._waited_s, self._cleared = 0.0, False
 
     def pose(self) -> tuple[float, float, float]:
         pose = self.node.pose()
@@ -214,6 +218,10 @@ class GoalRun:
         pose = self.pose()
         self._level_xy = (pose[0], pose[1])
         level, self._level = self._level, self._level + 1
+        if level == 2 and self._cleared and self._waited_s < self.node.settings.nav.people_wait_s:
+            # the path looked free, yet the robot was stopped again before it got anywhere (the
+            # person is still close ahead): go on waiting with what is left of the time
+            level, self._level = 1, 2
         if level >= 2:  # people were waited for and did not leave: settle if the goal is right there
             note = self._settle_note(pose)
             if note:
@@ -256,18 +264,21 @@ class GoalRun:
             return
         self.feedback(NavState.WAITING_FOR_PEOPLE)
         node.event("blocked_by_people", "excuse me, may I pass?", place=self.target.name)
-        t0 = self.clock.now()
-        wait_s = node.settings.nav.people_wait_s
+        self._cleared = False
+        t0, before = self.clock.now(), self._waited_s
+        wait_s = node.settings.nav.people_wait_s - before
         while self.clock.now() - t0 < wait_s:
             await self.clock.sleep(WATCH_PERIOD_S)
-            self._waited_s = self.clock.now() - t0
+            self._waited_s = before + self.clock.now() - t0
             if await asyncio.to_thread(self._path_free, intended.points):
                 node.event("path_clear", "thank you", place=self.target.name)
+                self._cleared = True
                 return
 
     def _path_free(self, points: np.ndarray) -> bool:
         """Whether the intended path, from the robot on, is free in the global costmap with the
-        latest scan marked (ray tracing clears where people were). Runs in a worker thread."""
+        latest scan marked (ray tracing clears where people were), and the controller's forward
+        check on the local costmap would let the robot start. Runs in a worker thread."""
         node = self.node
         pose = node.pose()
         if pose is None:
@@ -276,7 +287,11 @@ class GoalRun:
         d = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
         ahead = points[int(np.argmin(d)):]
         ahead = ahead[np.hypot(ahead[:, 0] - pose[0], ahead[:, 1] - pose[1]) > self.params.xy_tolerance_m]
-        return not path_blocked(node.global_cm, ahead, WATCH_AHEAD_M)
+        if path_blocked(node.global_cm, ahead, WATCH_AHEAD_M):
+            return False
+        local = node.local_cm
+        return len(ahead) < 2 or local is None or \
+            not PurePursuit(ahead, self.params, self.target.pose[2]).step(pose, local).blocked
 
     async def _spin(self, angle: float, speed: float) -> None:
         turned, last = 0.0, self.pose()[2]
