@@ -41,3 +41,21 @@ async def test_run_at_a_real_time_factor():
     await clock.run(step_s=0.01, speed=10.0, until=1.0)
     wall = time.monotonic() - wall0
     assert 0.08 < wall < 1.0
+
+
+async def test_a_paced_simulation_that_falls_behind_slows_down_instead_of_bursting():
+    """After a stall (a busy machine), simulated time goes on at the asked pace, not in a burst
+    that would leave work done in threads behind the simulated clock."""
+    clock = SimClock()
+    step_s, stall_at = 0.02, 0.1
+    walls: list[tuple[float, float]] = []
+
+    def physics(_dt: float) -> None:
+        if abs(clock.now() - stall_at) < 1e-9:
+            time.sleep(0.5)  # the machine stalls for half a second
+        walls.append((clock.now(), time.monotonic()))
+
+    await clock.run(step_s, speed=1.0, until=0.4, on_step=physics)
+    after = [w for t, w in walls if t > stall_at + 1e-9]
+    # without the stall's 0.5 s being caught up, the 14 steps after it take their 0.28 s
+    assert after[-1] - after[0] >= 0.2

@@ -23,6 +23,7 @@ SETTLE_ROUNDS = 8  # event-loop turns given to woken tasks after each simulated 
 TIME_EPS_S = 1e-9  # deadlines this close to "now" count as reached (float steps)
 LAG_WARN_S = 2.0  # a paced simulation this far behind its real-time factor says so
 LAG_WARN_EVERY_S = 30.0  # ... at most once per this many wall seconds
+LAG_REBASE_S = 0.2  # further behind than this, a paced simulation slows down instead of catching up
 
 _log = logging.getLogger("sage.clock")
 
@@ -139,9 +140,12 @@ class SimClock(Clock):
 
         ``speed`` is the real-time factor (1.0 real time, 10.0 ten times faster,
         None as fast as possible). ``on_step(dt)`` runs before each advance: the
-        simulator's physics step.
+        simulator's physics step. A paced simulation that falls behind (a busy machine)
+        runs slower than asked and never races to catch up: work done in threads (planning,
+        localization) takes wall time, and a burst of simulated time would leave it behind.
         """
         wall0, sim0 = time.monotonic(), self._now
+        pace_wall, pace_sim = wall0, sim0  # the pacing reference, moved on when behind
         k = 0  # steps taken: time is sim0 + k * step_s, so float errors do not accumulate
         last_warn = -LAG_WARN_EVERY_S
         while (until is None or self._now < until - TIME_EPS_S) and not (stop and stop.is_set()):
@@ -152,11 +156,14 @@ class SimClock(Clock):
             k += 1
             await self._step_to(sim0 + k * step_s)
             if speed is not None:
-                ahead = (self._now - sim0) / speed - (time.monotonic() - wall0)
+                wall = time.monotonic()
+                ahead = (self._now - pace_sim) / speed - (wall - pace_wall)
                 if ahead > 0:
                     await asyncio.sleep(ahead)
-                elif -ahead > LAG_WARN_S:
-                    last_warn = self._warn_lag(wall0, sim0, speed, last_warn)
+                elif -ahead > LAG_REBASE_S:
+                    pace_wall, pace_sim = wall, self._now
+                    if (wall - wall0) - (self._now - sim0) / speed > LAG_WARN_S:
+                        last_warn = self._warn_lag(wall0, sim0, speed, last_warn)
 
 
     def _warn_lag(self, wall0: float, sim0: float, speed: float, last_warn: float) -> float:
