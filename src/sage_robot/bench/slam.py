@@ -103,7 +103,25 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     }
     if args.relations and not args.odom_noise:
         odo_err = relation_error(stamps, odo, rels)
+        out.update(_reference_check(stamps, poses, odo, rels))
     if odo_err is not None:
         out["odometry_trans_error_mean_m"] = round(odo_err.trans_mean_m, 4)
         out["odometry_rot_error_mean_deg"] = round(odo_err.rot_mean_deg, 3)
     return out
+
+
+def _reference_check(stamps: Any, poses: Any, odo: Any, rels: list[Any]) -> dict[str, Any]:
+    """Short relations: how the reference relates to the odometry, and the rounding floor."""
+    import numpy as np
+
+    from sage_robot.core.geometry import relative
+    from sage_robot.nav.slam.refcheck import SHORT_GAP_SCANS, reference_quantization
+    from sage_robot.nav.slam.relations import match_stamps
+
+    i = match_stamps(stamps, np.array([r.t1 for r in rels]))
+    j = match_stamps(stamps, np.array([r.t2 for r in rels]))
+    short = np.nonzero(np.abs(j - i) <= SHORT_GAP_SCANS)[0]
+    ref = np.array([(rels[k].dx, rels[k].dy, rels[k].dtheta) for k in short]).reshape(-1, 3)
+    o = np.array([relative(tuple(odo[i[k]]), tuple(odo[j[k]])) for k in short]).reshape(-1, 3)
+    e = np.array([relative(tuple(poses[i[k]]), tuple(poses[j[k]])) for k in short]).reshape(-1, 3)
+    return reference_quantization(ref, o, e).as_dict()
