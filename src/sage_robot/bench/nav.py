@@ -238,6 +238,8 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
                 errs_deg.append(math.degrees(abs(wrap_angle(est[2] - world.theta))))
 
     sampler = asyncio.get_running_loop().create_task(sample())
+    hits: list[Any] = []  # the simulator's Collision records (what, where, how fast)
+    world.on_collision.append(hits.append)
     await clock.sleep(1.0)
     records = []
     for a, b in legs:
@@ -245,6 +247,7 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
         c0, d0, t0 = world.collisions, world.distance_m, clock.now()
         errs_m.clear()
         errs_deg.clear()
+        hits.clear()
         try:
             shortest = plan(static, (world.x, world.y), (goal.x, goal.y)).length_m
         except NoPath:
@@ -260,7 +263,9 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
                "collisions": world.collisions - c0, "time_s": round(clock.now() - t0, 1),
                "length_m": round(world.distance_m - d0, 2), "shortest_m": round(shortest, 2),
                "loc_samples": len(errs_m), "loc_sq_m": round(float(np.sum(np.square(errs_m))), 6),
-               "loc_sq_deg": round(float(np.sum(np.square(errs_deg))), 4)}
+               "loc_sq_deg": round(float(np.sum(np.square(errs_deg))), 4),
+               "hits": [{"kind": h.kind, "name": h.name, "x": round(h.x, 2), "y": round(h.y, 2),
+                         "speed_mps": round(h.speed_mps, 2)} for h in hits]}
         records.append(rec)
         keep(rec)
     sampler.cancel()
@@ -276,6 +281,8 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
         "success_rate": round(sum(r["ok"] for r in records) / max(1, len(records)), 3),
         "collisions": int(sum(r["collisions"] for r in records)),
         "failures": [{k: r[k] for k in ("from", "to", "reason")} for r in records if not r["ok"]],
+        "collision_details": [{"from": r["from"], "to": r["to"], **h}
+                              for r in records for h in r.get("hits", [])],
         "path_length_vs_shortest": round(float(np.median([r["length_m"] / r["shortest_m"] for r in good])), 3)
         if good else None,
         "median_leg_time_s": round(float(np.median([r["time_s"] for r in good])), 1) if good else None,
