@@ -58,3 +58,22 @@ def test_seed_style_answer(corpus_services):
         "similarity",
         "document_id",
     }
+
+
+def test_postgres_one_query_search_equals_the_generic_fusion(corpus_services):
+    """PostgresStore.hybrid_search (rankings + fusion + fetch in one SQL query) returns what
+    the interface's generic version (four queries, fusion in Python) returns."""
+    from sage_robot.kb.store.base import Store, query_terms
+
+    service = corpus_services["postgres"]
+    questions = [q["q"] for q in QUESTIONS] + ["where is it?", "zzzz qqqq"]  # no words / no matches
+    vectors = service.embedder.embed(questions)
+    for question, vec in zip(questions, vectors, strict=True):
+        for n, top_k in ((20, 5), (8, 8)):
+            terms = query_terms(question)
+            one = service.store.hybrid_search(vec, terms, n, top_k)
+            generic = Store.hybrid_search(service.store, vec, terms, n, top_k)
+            assert [h.chunk for h in one] == [h.chunk for h in generic], question
+            assert [h.score for h in one] == pytest.approx([h.score for h in generic], abs=1e-12)
+            assert [h.similarity for h in one] == pytest.approx([h.similarity for h in generic], abs=1e-6)
+            assert len(one) == top_k

@@ -2,7 +2,8 @@
 
 Search fuses two rankings with reciprocal rank fusion (RRF): full-text (BM25 / ts_rank)
 and vector similarity (all-MiniLM-L6-v2 cosine). RRF needs no score calibration between
-the two: each chunk scores sum(1 / (RRF_K + rank)) over the lists it appears in.
+the two: each chunk scores sum(1 / (RRF_K + rank)) over the lists it appears in
+(:func:`~sage_robot.kb.store.base.rrf_fuse`; PostgreSQL fuses in its one search query).
 
 Methods are blocking (model inference, database I/O); async callers run them with
 ``asyncio.to_thread``. Expected failures of ingest are values (:class:`IngestResult`).
@@ -27,7 +28,6 @@ from sage_robot.kb.embed import CachedEmbedder, Embedder, make_embedder
 from sage_robot.kb.extract import READERS, IngestError, extract
 from sage_robot.kb.store.base import NewChunk, NewDocument, Store, query_terms
 
-RRF_K = 60  # reciprocal-rank-fusion constant (Cormack et al. 2009)
 MIN_CANDIDATES = 20  # chunks taken from each ranking before fusion
 MAX_TOP_K = 50
 MAX_QUERY_CHARS = 2000
@@ -173,23 +173,14 @@ class KbService:
         if not 1 <= top_k <= MAX_TOP_K:
             raise SearchError(f"top_k must be between 1 and {MAX_TOP_K}, got {top_k}")
         n = max(MIN_CANDIDATES, 4 * top_k)
-        dense = self.store.vector_search(self.embedder.embed_one(query), n)
-        sparse = self.store.text_search(query_terms(query), n)
-        fused: dict[int, float] = {}
-        for ranking in ([cid for cid, _ in dense], sparse):
-            for rank, cid in enumerate(ranking):
-                fused[cid] = fused.get(cid, 0.0) + 1.0 / (RRF_K + rank + 1)
-        best = sorted(fused, key=lambda cid: (-fused[cid], cid))[:top_k]
-        rows = self.store.get_chunks(best)
-        cosine = dict(dense)
+        hits = self.store.hybrid_search(self.embedder.embed_one(query), query_terms(query), n, top_k)
         return [
             Passage(
-                text=rows[cid].text, source=rows[cid].source, title=rows[cid].title,
-                section=rows[cid].section, score=round(fused[cid], 6),
-                document_id=rows[cid].document_id, similarity=round(cosine.get(cid, 0.0), 4),
+                text=h.chunk.text, source=h.chunk.source, title=h.chunk.title,
+                section=h.chunk.section, score=round(h.score, 6),
+                document_id=h.chunk.document_id, similarity=round(h.similarity, 4),
             )
-            for cid in best
-            if cid in rows
+            for h in hits
         ]
 
     # ------------------------------------------------------------- documents

@@ -17,6 +17,8 @@ import numpy as np
 
 from sage_robot.core.errors import ConfigError
 
+RRF_K = 60  # reciprocal-rank-fusion constant (Cormack et al. 2009)
+
 # Words too common to help a full-text match (the vector side still sees them).
 _STOPWORDS_TEXT = """
 a an and are as at be been but by can could did do does for from had has have how i if in
@@ -71,6 +73,25 @@ class ChunkRow:
     page: int | None
     title: str
     source: str
+
+
+@dataclass(frozen=True)
+class Hit:
+    """One result of :meth:`Store.hybrid_search`."""
+
+    chunk: ChunkRow
+    score: float  # reciprocal-rank-fusion score: sum of 1 / (RRF_K + rank), rank from 1
+    similarity: float  # cosine similarity to the query; 0.0 when only full text found it
+
+
+def rrf_fuse(rankings: Sequence[Sequence[int]], top_k: int) -> list[tuple[int, float]]:
+    """The ``top_k`` best (chunk id, score) of the rankings by reciprocal rank fusion: each
+    id scores sum(1 / (RRF_K + rank)) over the rankings it is in (rank from 1); ties by id."""
+    fused: dict[int, float] = {}
+    for ranking in rankings:
+        for rank, cid in enumerate(ranking, start=1):
+            fused[cid] = fused.get(cid, 0.0) + 1.0 / (RRF_K + rank)
+    return sorted(fused.items(), key=lambda item: (-item[1], item[0]))[:top_k]
 
 
 def query_terms(query: str) -> list[str]:
@@ -130,6 +151,18 @@ class Store(ABC):
 
     @abstractmethod
     def get_chunks(self, ids: Sequence[int]) -> dict[int, ChunkRow]: ...
+
+    def hybrid_search(
+        self, vector: np.ndarray, terms: Sequence[str], n: int, top_k: int
+    ) -> list[Hit]:
+        """The ``n`` best of each ranking (vector, full text) fused by :func:`rrf_fuse`; the
+        ``top_k`` best with their chunks. A store may do it in one query (same results)."""
+        dense = self.vector_search(vector, n)
+        best = rrf_fuse([[cid for cid, _ in dense], self.text_search(terms, n)], top_k)
+        rows = self.get_chunks([cid for cid, _ in best])
+        cosine = dict(dense)
+        # A chunk deleted between the queries is left out.
+        return [Hit(rows[cid], score, cosine.get(cid, 0.0)) for cid, score in best if cid in rows]
 
     @abstractmethod
     def count_chunks(self) -> int: ...

