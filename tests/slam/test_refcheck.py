@@ -48,6 +48,17 @@ def test_a_grid_reference_is_recognised_and_its_floor_matches_a_perfect_estimato
     assert q_odo.estimate_error_m > q.estimate_error_m
 
 
+def test_the_covariance_split_recovers_each_side_s_noise() -> None:
+    rng = np.random.default_rng(5)
+    ref, odo, truth = _relations(rng, 20000, quantize=True)
+    ref = ref + np.column_stack((rng.normal(0, 0.012, (len(ref), 2)), np.zeros(len(ref))))
+    est = truth + np.column_stack((rng.normal(0, 0.009, (len(ref), 2)), np.zeros(len(ref))))
+    q = reference_quantization(ref, odo, est, GRID_M, ROT_GRID_DEG)
+    assert q.estimate_noise_m == pytest.approx((0.009, 0.009), abs=0.0015)
+    assert q.reference_noise_m == pytest.approx((0.012, 0.012), abs=0.0025)
+    assert q.floor_m < q.estimate_error_m
+
+
 def test_a_continuous_reference_is_not_on_the_grid() -> None:
     ref, odo, truth = _relations(np.random.default_rng(4), 2000, quantize=False)
     q = reference_quantization(ref, odo, truth, GRID_M, ROT_GRID_DEG)

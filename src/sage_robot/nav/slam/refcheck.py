@@ -38,6 +38,12 @@ class ReferenceQuantization:
     rot_grid_deg: float
     estimate_error_m: float  # mean translational error of the estimate on these relations
     floor_m: float  # mean error a perfect estimator with the estimate's offsets would get
+    # Per axis (x, y of the first pose's frame, m): the part of the estimate's offset from the
+    # odometry that the reference's does not share, and the part of the reference's beyond
+    # the rounding that the estimate's does not share (covariance split; assumes independent
+    # errors, so an error both scan matchers make counts as truth).
+    estimate_noise_m: tuple[float, float] = (0.0, 0.0)
+    reference_noise_m: tuple[float, float] = (0.0, 0.0)
 
     def as_dict(self) -> dict[str, float | int]:
         return {
@@ -49,6 +55,8 @@ class ReferenceQuantization:
             "reference_grid_m": self.grid_m,
             "reference_rot_grid_deg": self.rot_grid_deg,
             "reference_rounding_floor_m": round(self.floor_m, 5),
+            "estimate_noise_xy_m": [round(v, 4) for v in self.estimate_noise_m],
+            "reference_noise_xy_m": [round(v, 4) for v in self.reference_noise_m],
         }
 
 
@@ -102,6 +110,7 @@ def reference_quantization(
     common = (math.atan2(np.sin(angle).mean(), np.cos(angle).mean()) / (2 * math.pi)) * rot_grid_deg
     gap = np.abs((residue - common + rot_grid_deg / 2) % rot_grid_deg - rot_grid_deg / 2)
     est_off = estimate[:, :2] - odometry[:, :2]
+    est_noise, ref_noise = _covariance_split(est_off, off, grid_m**2 / 12.0)
     return ReferenceQuantization(
         relations=n,
         equal_odometry=float((length < EQUAL_TOLERANCE_M).mean()),
@@ -111,4 +120,21 @@ def reference_quantization(
         rot_grid_deg=rot_grid_deg,
         estimate_error_m=float(np.hypot(*(estimate[:, :2] - reference[:, :2]).T).mean()),
         floor_m=rounding_error(est_off, grid_m),
+        estimate_noise_m=est_noise,
+        reference_noise_m=ref_noise,
     )
+
+
+def _covariance_split(
+    est_off: np.ndarray, ref_off: np.ndarray, rounding_var: float
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Per axis: if est = t + a and ref = t + b + rounding with t, a, b independent, then
+    cov(est, ref) = var(t): what is left of each variance is the noise of each (std, m)."""
+    if len(est_off) < 2:
+        return (0.0, 0.0), (0.0, 0.0)
+    est, ref = [], []
+    for axis in (0, 1):
+        c = np.cov(est_off[:, axis], ref_off[:, axis])
+        est.append(math.sqrt(max(c[0, 0] - c[0, 1], 0.0)))
+        ref.append(math.sqrt(max(c[1, 1] - c[0, 1] - rounding_var, 0.0)))
+    return (est[0], est[1]), (ref[0], ref[1])
