@@ -45,7 +45,7 @@ class ReferenceQuantization:
     estimate_noise_m: tuple[float, float] = (0.0, 0.0)
     reference_noise_m: tuple[float, float] = (0.0, 0.0)
 
-    def as_dict(self) -> dict[str, float | int]:
+    def as_dict(self) -> dict[str, float | int | list[float]]:
         return {
             "short_relations": self.relations,
             "short_trans_error_mean_m": round(self.estimate_error_m, 5),
