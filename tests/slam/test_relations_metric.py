@@ -29,6 +29,7 @@ def test_hand_computed_errors() -> None:
     assert err.trans_std_m == pytest.approx(np.std([0.1, 0.0, 0.2]))
     assert err.rot_mean_deg == pytest.approx(10.0 / 3)
     assert err.trans_max_m == pytest.approx(0.2)
+    assert err.trans_median_m == pytest.approx(0.1)
 
 
 def test_timestamps_match_the_nearest_scan() -> None:

@@ -41,12 +41,14 @@ class RelationError:
     rot_mean_deg: float
     rot_std_deg: float
     trans_max_m: float
+    trans_median_m: float = 0.0
 
     def as_dict(self) -> dict[str, float | int]:
         return {
             "relations": self.count,
             "trans_error_mean_m": round(self.trans_mean_m, 5),
             "trans_error_std_m": round(self.trans_std_m, 5),
+            "trans_error_median_m": round(self.trans_median_m, 5),
             "trans_error_max_m": round(self.trans_max_m, 4),
             "rot_error_mean_deg": round(self.rot_mean_deg, 4),
             "rot_error_std_deg": round(self.rot_std_deg, 4),
@@ -116,4 +118,5 @@ def relation_error(
         float(rot_deg.mean()),
         float(rot_deg.std()),
         float(trans.max()),
+        float(np.median(trans)),
     )
