@@ -175,9 +175,37 @@ def test_per_model_threshold_and_patience():
         WakeDetector(TwoModelEngine([]), model_thresholds={"a": 1.5})
 
 
+def test_smoothing_averages_scores_before_the_threshold():
+    """A moderate score held over frames passes; a one-frame spike of the same height
+    does not (mean over the last 3 frames)."""
+    held = [0.0, 0.35, 0.35, 0.35, 0.0, 0.0]
+    spike = [0.0, 0.0, 0.9, 0.0, 0.0, 0.0]
+    for scores, frames in ((held, [4]), (spike, [])):
+        det = WakeDetector(ScriptedEngine(scores), threshold=0.32, patience=1, smoothing=3)
+        found = det.feed(np.zeros(len(scores) * FRAME_SAMPLES, np.int16))
+        assert [round(d.time_s / 0.08) for d in found] == frames
+        assert det.max_smoothed["w"] == pytest.approx(max(scores) if scores is held else 0.3)
+    with pytest.raises(ValueError, match="smoothing"):
+        WakeDetector(ScriptedEngine([]), model_smoothing={"w": 0})
+
+
+def test_profile_alexa_wakes_on_alexa_not_on_alex(models, voice_settings, say16k):
+    """alexa's profile settings (0.8, 2-frame mean, 3 frames): a spoken "Alexa" wakes it,
+    the bench's confusable "Alex sat on the bench outside" does not."""
+    models.wake.reset()
+    det = WakeDetector.from_settings(models.wake, voice_settings)
+    assert det.smoothings["alexa"] > 1 and det.patiences["alexa"] > 1
+    found = det.feed(np.concatenate([silence(0.5), say16k("Alexa, where is the cafe?"), silence(1)]))
+    assert [d.model for d in found] == ["alexa"]
+    models.wake.reset()
+    det = WakeDetector.from_settings(models.wake, voice_settings)
+    assert det.feed(np.concatenate([silence(0.5), say16k("Alex sat on the bench outside."),
+                                    silence(1)])) == []  # fmt: skip
+
+
 def test_profile_detector_no_wake_on_neutral_and_noise(models, voice_settings, say16k):
-    """The profile's per-model settings (hey_jarvis 0.4, one frame) stay silent on other
-    speech and noise, and still hear an espeak-ng "hey jarvis" in noise."""
+    """The profile's per-model settings (hey_jarvis 0.2 on a 5-frame mean) stay silent on
+    other speech and noise, and still hear an espeak-ng "hey jarvis" in noise."""
     from sage_robot.bench.voice import _noisy
     from sage_robot.voice.tts import EspeakEngine
 

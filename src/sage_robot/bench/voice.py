@@ -5,7 +5,8 @@
 - End of speech → first audio: whole turns through the pipeline on the wall clock, with a
   brain that echoes the question (the simulated room's mic and speaker).
 - Wake false rejects over synthesized "hey jarvis" (Piper at several speeds, espeak-ng
-  voices, clean and noisy) and false accepts over minutes of other speech and noise.
+  voices, clean and in white noise; apart, in the babble of other talkers) and "alexa",
+  and false accepts over minutes of other speech and noise.
 - CPU per 80 ms frame (wake models + VAD).
 """
 
@@ -24,11 +25,15 @@ RATE = 16000
 FRAME = 1280  # 80 ms
 POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")
 WAKE_PHRASES = ("Hey Jarvis.", "Hey Jarvis, where is the lab?")
+ALEXA_PHRASES = ("Alexa.", "Alexa, where is the lab?")
 PIPER_SPEEDS = (0.8, 0.9, 1.0, 1.15, 1.3)  # length scales: < 1 faster
 ESPEAK_VOICES = ("en-us", "en-us+f3", "en-gb", "en-us+m3")
 ESPEAK_RATES = (140, 175)  # words per minute
 SNRS_DB = (None, 15.0, 5.0)
 WAKE_NOISE_SEED = 11  # clean, then white noise at these signal-to-noise ratios
+BABBLE_SNRS_DB = (10.0, 5.0)  # four other talkers (a busy hallway) at these ratios
+BABBLE_TALKERS = 4
+BABBLE_SEED = 12
 QUESTIONS = ("Where is the library?", "What time does the lab open?", "Who teaches robotics?",
              "Can you take me to the cafe?", "How old is this building?")  # fmt: skip
 NEUTRAL = (
@@ -109,35 +114,71 @@ def _frame_cpu(models: Any) -> dict[str, Any]:
             "cpu_share_of_realtime": round(cpu_ms / 80, 3)}  # fmt: skip
 
 
-def _wake_clips(speech: Any, quick: bool) -> list[tuple[str, np.ndarray]]:
+def _wake_sources(speech: Any, phrases: tuple[str, ...], quick: bool) -> list[tuple[str, np.ndarray]]:
+    """Clean 16 kHz renderings: Piper at several speeds (each phrase), espeak-ng voices (first)."""
     from sage_robot.voice.audio_io import resample
     from sage_robot.voice.tts import EspeakEngine
 
-    clips: list[tuple[str, np.ndarray]] = []
+    out: list[tuple[str, np.ndarray]] = []
     piper = speech.engine
-
-    def noisy(pcm: np.ndarray, snr: float | None) -> np.ndarray:
-        # Noise seeded per clip: the same clip gets the same noise in every run.
-        return _noisy(pcm, snr, np.random.default_rng([WAKE_NOISE_SEED, len(clips)]))
-
-    speeds = PIPER_SPEEDS[:2] if quick else PIPER_SPEEDS
-    for speed in speeds:
+    for speed in PIPER_SPEEDS[:2] if quick else PIPER_SPEEDS:
         piper.length_scale = speed
-        for phrase in WAKE_PHRASES:
+        for phrase in phrases:
             pcm = resample(piper.synthesize_sentence(phrase), piper.sample_rate, RATE)
-            for snr in SNRS_DB:
-                clips.append((f"piper x{speed} {snr}dB {phrase}", noisy(pcm, snr)))
+            out.append((f"piper x{speed} {phrase}", pcm))
     piper.length_scale = None
     for voice in ESPEAK_VOICES[: 1 if quick else None]:
         for wpm in ESPEAK_RATES:
             es = EspeakEngine(voice, wpm)
-            pcm = resample(es.synthesize_sentence(WAKE_PHRASES[0]), es.sample_rate, RATE)
-            for snr in SNRS_DB:
-                clips.append((f"espeak {voice} {wpm}wpm {snr}dB", noisy(pcm, snr)))
+            pcm = resample(es.synthesize_sentence(phrases[0]), es.sample_rate, RATE)
+            out.append((f"espeak {voice} {wpm}wpm {phrases[0]}", pcm))
+    return out
+
+
+def _white_clips(sources: list[tuple[str, np.ndarray]]) -> list[tuple[str, np.ndarray]]:
+    """Each source clean and in white noise at ``SNRS_DB`` (noise seeded per clip)."""
+    clips: list[tuple[str, np.ndarray]] = []
+    for name, pcm in sources:
+        for snr in SNRS_DB:
+            rng = np.random.default_rng([WAKE_NOISE_SEED, len(clips)])
+            clips.append((f"{name} {snr}dB", _noisy(pcm, snr, rng)))
     return clips
 
 
-def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], vs: Any) -> dict[str, Any]:
+def _babble_clips(sources: list[tuple[str, np.ndarray]], talkers: list[np.ndarray]
+                  ) -> list[tuple[str, np.ndarray]]:  # fmt: skip
+    """Each source in the babble of ``BABBLE_TALKERS`` other talkers at ``BABBLE_SNRS_DB``."""
+    clips: list[tuple[str, np.ndarray]] = []
+    for name, pcm in sources:
+        for snr in BABBLE_SNRS_DB:
+            rng = np.random.default_rng([BABBLE_SEED, len(clips)])
+            babble = np.zeros(len(pcm))
+            for j in rng.choice(len(talkers), BABBLE_TALKERS, replace=False):
+                src = np.tile(talkers[j].astype(np.float64), len(pcm) // len(talkers[j]) + 2)
+                off = int(rng.integers(0, len(talkers[j])))
+                babble += src[off : off + len(pcm)]
+            sig = float(np.sqrt(np.mean(pcm.astype(np.float64) ** 2)))
+            babble *= sig / 10 ** (snr / 20) / (float(np.sqrt(np.mean(babble**2))) + 1e-9)
+            clips.append((f"{name} babble {snr}dB", np.clip(pcm + babble, -32768, 32767).astype(np.int16)))
+    return clips
+
+
+def _talkers(speech: Any) -> list[np.ndarray]:
+    """Other talkers for the babble: neutral sentences in Piper's and espeak-ng's voices."""
+    from sage_robot.voice.audio_io import resample
+    from sage_robot.voice.tts import EspeakEngine
+
+    piper = speech.engine
+    out = [resample(piper.synthesize_sentence(s), piper.sample_rate, RATE) for s in NEUTRAL[:6]]
+    for voice in ESPEAK_VOICES:
+        es = EspeakEngine(voice, ESPEAK_RATES[1])
+        out.append(resample(es.synthesize_sentence(NEUTRAL[6 + len(out) % 6]), es.sample_rate, RATE))
+    return out
+
+
+def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], vs: Any, model: str = "hey_jarvis",
+                   prefix: str = "wake") -> dict[str, Any]:  # fmt: skip
+    """Clips (1 s of silence either side) in which ``model`` is not detected."""
     from sage_robot.voice.wake import WakeDetector
 
     pad = np.zeros(RATE, dtype=np.int16)
@@ -145,11 +186,11 @@ def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], vs: Any) ->
     for name, pcm in clips:
         models.wake.reset()
         det = WakeDetector.from_settings(models.wake, vs)
-        if not det.feed(np.concatenate([pad, pcm, pad])):
+        if model not in {d.model for d in det.feed(np.concatenate([pad, pcm, pad]))}:
             missed.append(name)
-    return {"wake_clips": len(clips), "wake_false_rejects": len(missed),
-            "wake_false_reject_rate": round(len(missed) / max(1, len(clips)), 3),
-            "wake_missed": missed[:10]}  # fmt: skip
+    return {f"{prefix}_clips": len(clips), f"{prefix}_false_rejects": len(missed),
+            f"{prefix}_false_reject_rate": round(len(missed) / max(1, len(clips)), 3),
+            f"{prefix}_missed": missed[:10]}  # fmt: skip
 
 
 def _non_wake_audio(speech: Any, minutes: float) -> np.ndarray:
@@ -198,6 +239,7 @@ def _false_accepts(models: Any, audio: np.ndarray, vs: Any) -> dict[str, Any]:
     found = det.feed(audio)
     return {"fa_audio_min": round(len(audio) / RATE / 60, 2), "wake_false_accepts": len(found),
             "fa_max_scores": {k: round(v, 3) for k, v in det.max_scores.items()},
+            "fa_max_smoothed": {k: round(v, 3) for k, v in det.max_smoothed.items()},
             "fa_detections": [(d.model, round(d.time_s, 1)) for d in found[:10]]}  # fmt: skip
 
 
@@ -271,7 +313,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                               for n in settings.wake_models}  # fmt: skip
     out["wake_patience"] = {n: settings.wake_model_patience.get(n, settings.wake_patience_frames)
                             for n in settings.wake_models}  # fmt: skip
-    out.update(_false_rejects(models, _wake_clips(models.speech, args.quick), settings))
+    out["wake_smoothing"] = {n: settings.wake_model_smoothing.get(n, settings.wake_smoothing_frames)
+                             for n in settings.wake_models}  # fmt: skip
+    jarvis = _wake_sources(models.speech, WAKE_PHRASES, args.quick)
+    out.update(_false_rejects(models, _white_clips(jarvis), settings))
+    talkers = _talkers(models.speech)
+    out.update(_false_rejects(models, _babble_clips(jarvis, talkers), settings, prefix="wake_babble"))
+    alexa = _wake_sources(models.speech, ALEXA_PHRASES, args.quick)
+    out.update(_false_rejects(models, _white_clips(alexa), settings, "alexa", prefix="alexa"))
     minutes = 0.5 if args.quick else args.fa_minutes
     out.update(_false_accepts(models, _non_wake_audio(models.speech, minutes), settings))
     return out

@@ -43,28 +43,37 @@ from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
 T = TypeVar("T")
 SIM_OUT_DIR_KEY = "voice_sim_out_dir"  # ctx.resources: where the sim speaker writes WAV files
 SIM_AUDIO_KEY = "voice_sim_audio"  # ctx.resources: (SimMicrophone, SimSpeaker) once set up
+PARTIAL_THREADS = 1  # CPU threads of the partial-transcript model (the rest stay for the final)
 
 
 @dataclass
 class VoiceModels:
-    """Everything heavy, loaded once: wake engines (microphone and self-hearing), VAD, STT, TTS."""
+    """Everything heavy, loaded once: wake engines (microphone and self-hearing), VAD, STT, TTS,
+    and with ``asr_partial`` a second Whisper for the partial transcripts (its own instance on
+    one CPU thread, so it never holds the final transcription's model)."""
 
     wake: OpenWakeWordEngine
     wake_self: OpenWakeWordEngine
     vad: SileroVad
     stt: SpeechToText
     speech: Speech
+    stt_partial: SpeechToText | None = None
 
     @classmethod
     def load(cls, s: VoiceSettings) -> VoiceModels:
         stt = SpeechToText(s.stt_model, s.stt_device, s.stt_compute_type)
         stt.warm_up()
+        partial = None
+        if s.asr_partial:
+            partial = SpeechToText(s.asr_partial_model, "cpu", "int8", cpu_threads=PARTIAL_THREADS)
+            partial.warm_up()
         return cls(
             wake=OpenWakeWordEngine(s.wake_models),
             wake_self=OpenWakeWordEngine(s.wake_models),
             vad=SileroVad(),
             stt=stt,
             speech=Speech(make_engine(s.tts_engine, s.tts_voice, s.tts_deterministic)),
+            stt_partial=partial,
         )
 
 
@@ -76,9 +85,12 @@ def build_pipeline(
     models.wake_self.reset()
     mouth = Mouth(bus, clock, models.speech, speaker,
                   reference=WakeDetector(models.wake_self, s.wake_threshold, s.wake_refractory_s,
-                                         patience=1, model_thresholds=s.wake_model_thresholds))
+                                         patience=1, model_thresholds=s.wake_model_thresholds,
+                                         smoothing=s.wake_smoothing_frames,
+                                         model_smoothing=s.wake_model_smoothing))
     wake = WakeDetector.from_settings(models.wake, s)
-    return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt)
+    partial = models.stt_partial if s.asr_partial else None
+    return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt, partial_stt=partial)
 
 
 async def in_load_thread(fn: Callable[..., T], *args: Any) -> T:

@@ -6,6 +6,12 @@ maximum length), transcribed, published on ``/sage/heard`` and sent to the brain
 ``converse`` action; each sentence of its streamed feedback is spoken as it arrives.
 After the reply the robot listens ``follow_up_s`` more without a wake word.
 
+While the visitor speaks, every ``asr_partial_interval_s`` of audio the utterance so far
+is re-transcribed by a second Whisper instance (``partial_stt``) in a worker thread and
+shown as ``asr_partial``; a tick is skipped while the previous partial still runs or the
+visitor pauses (the final transcription may be about to start), and partials never hold
+the final model's lock.
+
 A wake word while the robot thinks or speaks interrupts it (barge-in) — unless the robot
 itself just said something that sounds like the wake word (its reference detector, see
 :mod:`player`): its own voice is ignored. Text on ``/sage/say`` is spoken too.
@@ -88,9 +94,10 @@ class VoicePipeline:
         vad: SileroVad,
         stt: SpeechToText,
         log: StructLogger | None = None,
+        partial_stt: SpeechToText | None = None,
     ) -> None:
         self.bus, self.clock, self.settings, self.mic, self.mouth = bus, clock, settings, mic, mouth
-        self.wake, self.vad, self.stt = wake, vad, stt
+        self.wake, self.vad, self.stt, self.partial_stt = wake, vad, stt, partial_stt
         self.log = log or get_logger("voice")
         self.recorder = UtteranceRecorder(settings.vad_threshold, settings.vad_silence_s,
                                           settings.vad_preroll_s, settings.max_utterance_s,
@@ -102,6 +109,11 @@ class VoicePipeline:
         self.barge_ins = 0
         self.self_echoes_ignored = 0
         self.early_transcripts = 0  # turns whose transcript was started on the pause
+        self.partials = 0  # partial transcripts shown
+        self.partials_skipped = 0  # ticks skipped: the previous partial was still running
+        self._listen_id = 0  # one per listening window: late partials of an old one are dropped
+        self._partial_task: asyncio.Task[None] | None = None
+        self._partial_at_s = 0.0  # utterance length at the last partial tick (s)
         self.latencies: list[TurnLatency] = []
         self._times: TurnTimes | None = None
         self._turn_task: asyncio.Task[None] | None = None
@@ -149,6 +161,8 @@ class VoicePipeline:
                 frame = await self.mic.read()
                 await self.process_frame(frame)
         finally:
+            if self._partial_task is not None:
+                self._partial_task.cancel()
             await self._stop_turn()
 
     def _analyse(self, frame: np.ndarray) -> tuple[list[Detection], float]:
@@ -174,6 +188,34 @@ class VoicePipeline:
                 self._on_utterance(utt)
             else:
                 self._transcribe_early()
+                self._transcribe_partial()
+
+    def _transcribe_partial(self) -> None:
+        """Every ``asr_partial_interval_s`` of audio while the visitor speaks, transcribe the
+        utterance so far for the face (skipped while the last one runs or on a pause)."""
+        rec = self.recorder
+        if self.partial_stt is None or not rec.started or rec.silent_s > 0:
+            return
+        if rec.duration_s - self._partial_at_s < self.settings.asr_partial_interval_s - 1e-9:
+            return
+        self._partial_at_s = rec.duration_s
+        if self._partial_task is not None and not self._partial_task.done():
+            self.partials_skipped += 1
+            return
+        self._partial_task = asyncio.get_running_loop().create_task(
+            self._partial(rec.snapshot(), self._listen_id), name="voice.partial"
+        )
+
+    async def _partial(self, pcm: np.ndarray, listen_id: int) -> None:
+        assert self.partial_stt is not None
+        try:
+            transcript = await asyncio.to_thread(self.partial_stt.transcribe, pcm, True)
+        except Exception as exc:  # a partial is only for show: the final still runs
+            self.log.warning("partial transcript failed", error=str(exc))
+            return
+        if listen_id == self._listen_id and self.state is State.LISTENING and transcript.text:
+            self.partials += 1
+            self._set_ui(asr_partial=transcript.text)
 
     def _transcribe_early(self) -> None:
         """Start Whisper on a pause that will probably end the utterance: if nothing more
@@ -222,6 +264,8 @@ class VoicePipeline:
         self.recorder.start_timeout_s = timeout_s
         self.vad.reset()
         self._early = None
+        self._listen_id += 1
+        self._partial_at_s = 0.0
         self._skip_s = 0.0 if follow_up else WAKE_TAIL_S
         self._set_ui(phase=Phase.LISTENING, asr_partial="", asr_final="", llm_tokens="",
                      error_msg="", tts_viseme=0.0)  # fmt: skip
@@ -361,5 +405,6 @@ class VoicePipeline:
     def stats(self) -> dict[str, Any]:
         return {"state": self.state.value, "turns": self.turns, "barge_ins": self.barge_ins,
                 "wakes": len(self.detections), "self_echoes_ignored": self.self_echoes_ignored,
-                "early_transcripts": self.early_transcripts,
+                "early_transcripts": self.early_transcripts, "partials": self.partials,
+                "partials_skipped": self.partials_skipped,
                 **self.mouth.stats()}  # fmt: skip

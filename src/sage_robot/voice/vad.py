@@ -146,6 +146,11 @@ class UtteranceRecorder:
         """Speech so far; it grows only when the visitor speaks (a version number)."""
         return self._speech_s
 
+    @property
+    def duration_s(self) -> float:
+        """Audio recorded so far, pre-roll included (s); 0 before speech starts."""
+        return len(self._frames) * FRAME_S
+
     def snapshot(self) -> np.ndarray:
         """The utterance so far (pre-roll included)."""
         return np.concatenate(self._frames) if self._frames else np.zeros(0, dtype=np.int16)

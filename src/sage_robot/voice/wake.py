@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,6 +30,7 @@ WARMUP_SEED = 1234  # seeds the start-up history so every run scores the same
 WARMUP_AMPLITUDE = 1000  # int16 peak of that start-up noise (openWakeWord's value)
 DEFAULT_REFRACTORY_S = 2.0
 DEFAULT_PATIENCE = 2  # frames in a row over threshold: a real wake word gives 5-14, a spike 1
+DEFAULT_SMOOTHING = 1  # frames averaged before the threshold (1: the frame's own score)
 
 
 class WakeEngine(Protocol):
@@ -147,10 +149,12 @@ class Detection:
 
 
 class WakeDetector:
-    """Threshold, patience and refractory over an engine; accepts chunks of any length.
+    """Smoothing, threshold, patience and refractory over an engine; accepts any chunks.
 
-    A detection needs ``patience`` frames in a row at or over the threshold (isolated
-    one-frame spikes on words like "Alex" are not wake words).
+    Each model's score is first averaged over its last ``smoothing`` frames (a wake word
+    in noise scores moderately over several frames, a confusable word spikes for one).
+    A detection needs ``patience`` frames in a row with that average at or over the
+    threshold (isolated one-frame spikes on words like "Alex" are not wake words).
     After a detection the same model is ignored for ``refractory_s`` (the score stays
     high for several frames while the phrase ends; one utterance is one detection).
     """
@@ -164,15 +168,20 @@ class WakeDetector:
         patience: int = DEFAULT_PATIENCE,
         model_thresholds: Mapping[str, float] | None = None,
         model_patience: Mapping[str, int] | None = None,
+        smoothing: int = DEFAULT_SMOOTHING,
+        model_smoothing: Mapping[str, int] | None = None,
     ) -> None:
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
         self.patience = patience
         # Per model (name → value); models not named use ``threshold`` / ``patience``.
         self.thresholds = {n: (model_thresholds or {}).get(n, threshold) for n in engine.names}
         self.patiences = {n: (model_patience or {}).get(n, patience) for n in engine.names}
-        for name, p in [("", patience), *self.patiences.items()]:
-            if p < 1:
-                raise ValueError(f"patience must be >= 1 frame, got {p} {name}".rstrip())
+        self.smoothings = {n: (model_smoothing or {}).get(n, smoothing) for n in engine.names}
+        for what, values in (("patience", self.patiences), ("smoothing", self.smoothings)):
+            for name, p in [("", patience if what == "patience" else smoothing), *values.items()]:
+                if p < 1:
+                    raise ValueError(f"{what} must be >= 1 frame, got {p} {name}".rstrip())
+        self._recent: dict[str, deque[float]] = {n: deque(maxlen=k) for n, k in self.smoothings.items()}
         for name, th in self.thresholds.items():
             if not 0 <= th <= 1:
                 raise ValueError(f"wake threshold of {name} must be in 0..1, got {th}")
@@ -182,18 +191,18 @@ class WakeDetector:
         self._framer = Framer(FRAME_SAMPLES)
         self.frames = 0
         self._last: dict[str, float] = {}
-        self.max_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
+        self.max_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)  # raw frame scores
+        self.max_smoothed: dict[str, float] = dict.fromkeys(engine.names, 0.0)
         self.last_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
 
     @classmethod
     def from_settings(cls, engine: WakeEngine, s: Any, threshold: float | None = None) -> WakeDetector:
         """The profile's detector (``voice`` settings); ``threshold`` overrides every model's."""
-        if threshold is not None:
-            return cls(engine, threshold, s.wake_refractory_s, patience=s.wake_patience_frames,
-                       model_patience=s.wake_model_patience)  # fmt: skip
-        return cls(engine, s.wake_threshold, s.wake_refractory_s, patience=s.wake_patience_frames,
-                   model_thresholds=s.wake_model_thresholds,
-                   model_patience=s.wake_model_patience)  # fmt: skip
+        return cls(engine, s.wake_threshold if threshold is None else threshold,
+                   s.wake_refractory_s, patience=s.wake_patience_frames,
+                   model_thresholds=s.wake_model_thresholds if threshold is None else None,
+                   model_patience=s.wake_model_patience, smoothing=s.wake_smoothing_frames,
+                   model_smoothing=s.wake_model_smoothing)  # fmt: skip
 
     @property
     def time_s(self) -> float:
@@ -205,7 +214,10 @@ class WakeDetector:
         self.frames = 0
         self._last.clear()
         self._run.clear()
+        for recent in self._recent.values():
+            recent.clear()
         self.max_scores = dict.fromkeys(self.engine.names, 0.0)
+        self.max_smoothed = dict.fromkeys(self.engine.names, 0.0)
 
     def feed(self, chunk: np.ndarray) -> list[Detection]:
         """Push audio; returns the detections completed by it."""
@@ -222,8 +234,12 @@ class WakeDetector:
             self.scores.append(scores)
         found = []
         t = self.time_s
-        for name, s in scores.items():
-            self.max_scores[name] = max(self.max_scores.get(name, 0.0), s)
+        for name, raw in scores.items():
+            self.max_scores[name] = max(self.max_scores.get(name, 0.0), raw)
+            recent = self._recent.setdefault(name, deque(maxlen=1))
+            recent.append(raw)
+            s = sum(recent) / len(recent)  # the mean of the last ``smoothing`` frames
+            self.max_smoothed[name] = max(self.max_smoothed.get(name, 0.0), s)
             over = s >= self.thresholds.get(name, self.threshold)
             self._run[name] = self._run.get(name, 0) + 1 if over else 0
             if self._run[name] < self.patiences.get(name, self.patience):

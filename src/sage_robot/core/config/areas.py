@@ -77,13 +77,20 @@ class VoiceSettings(Section):
     wake_patience_frames: int = Field(
         2, ge=1, description="80 ms frames in a row over the threshold for a detection."
     )
+    wake_smoothing_frames: int = Field(
+        1, ge=1, description="80 ms frames whose scores are averaged before the threshold."
+    )
     wake_model_thresholds: dict[str, float] = Field(
-        default_factory=lambda: {"hey_jarvis": 0.4},
+        default_factory=lambda: {"hey_jarvis": 0.2, "alexa": 0.8},
         description="Per-model score thresholds overriding wake_threshold (model name → 0..1).",
     )
     wake_model_patience: dict[str, int] = Field(
-        default_factory=lambda: {"hey_jarvis": 1},
+        default_factory=lambda: {"hey_jarvis": 1, "alexa": 3},
         description="Per-model patience overriding wake_patience_frames (model name → frames).",
+    )
+    wake_model_smoothing: dict[str, int] = Field(
+        default_factory=lambda: {"hey_jarvis": 5, "alexa": 2},
+        description="Per-model smoothing overriding wake_smoothing_frames (model name → frames).",
     )
     vad_threshold: float = Field(0.6, ge=0, le=1, description="Speech probability threshold.")
     vad_silence_s: float = Field(0.7, gt=0, description="Silence that ends an utterance (s).")
@@ -98,6 +105,15 @@ class VoiceSettings(Section):
     stt_model: str = Field("tiny.en", description="Whisper model: 'tiny.en' (bundled) or a path.")
     stt_device: str = Field("cpu", description="'cpu' or 'cuda'.")
     stt_compute_type: str = Field("int8", description="CTranslate2 compute type.")
+    asr_partial: bool = Field(
+        True, description="While listening, re-transcribe the utterance so far for the face."
+    )
+    asr_partial_interval_s: float = Field(
+        1.0, gt=0, description="Audio between partial transcripts (s); a busy tick is skipped."
+    )
+    asr_partial_model: str = Field(
+        "tiny.en", description="Whisper model for partials (its own instance, CPU, one thread)."
+    )
     tts_engine: str = Field("piper", description="'piper' (GPL extra) or 'espeak' (espeak-ng).")
     tts_voice: str = Field("en_US-joe-medium", description="Piper voice name or .onnx path.")
     tts_deterministic: bool = Field(False, description="No synthesis noise (tests, benchmarks).")
