@@ -1,5 +1,12 @@
 """AMCL speed and convergence: update time at 500 and 2000 particles (60 beams), and the
-time to converge from global localization while the robot drives.
+distance to converge from global localization while the robot drives.
+
+Each trial drives a random planned route of ``--drive-m`` from a random drivable cell,
+after a global localization from the first scan. *Converged*: the estimate is within 0.5 m
+and 0.2 rad of the truth from some point to the end of the drive. *Declared*: the filter's
+own verdict as the navigator reads it from ``/localization/health`` (one hypothesis left,
+``spread_m`` < 0.5 m, scan fit ≥ 0.75); a *false declaration* is a step declared while the
+estimate is wrong: the quality check that must catch a wrong convergence.
 
 Scans come from the simulator's ray caster on the map itself (1 % range noise, as the
 simulated RPLIDAR). Update times are wall-clock; convergence is in simulated seconds of
@@ -15,11 +22,14 @@ from typing import Any
 
 import numpy as np
 
+from sage_robot.core.errors import SageError
+
 UPDATES = 100  # timed filter updates per particle count
 DRIVE_SPEED_MPS = 0.5
 STEP_M = 0.25  # AMCL update_min_d: one filter update per step
 CONVERGED_M, CONVERGED_RAD = 0.5, 0.2
-TRIAL_STEPS = 80  # give up a convergence trial after this many updates (20 m)
+DRIVE_M = 20.0  # give up a convergence trial after this much driving (m)
+DECLARE_FIT = 0.75  # the navigator's RELOCALIZED_SCORE: share of returns on mapped walls
 RANGE_NOISE = 0.01
 
 
@@ -28,10 +38,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--beams", type=int, default=60, help="beams per update")
     p.add_argument("--trials", type=int, default=5, help="global-localization trials")
     p.add_argument("--seed", type=int, default=0, help="random seed")
+    p.add_argument("--drive-m", type=float, default=DRIVE_M, help="driving allowed per trial (m)")
 
 
-def _route(cm: Any, rng: np.random.Generator, cells: np.ndarray) -> np.ndarray:
-    """A drivable route of at least 20 m between two random free cells (x, y points)."""
+def _route(cm: Any, rng: np.random.Generator, cells: np.ndarray, length_m: float = DRIVE_M) -> np.ndarray:
+    """A drivable route of at least ``length_m`` between two random free cells (x, y points)."""
     from sage_robot.nav.planner import NoPath, plan, resample
 
     for _ in range(50):
@@ -41,9 +52,9 @@ def _route(cm: Any, rng: np.random.Generator, cells: np.ndarray) -> np.ndarray:
             p = plan(cm, (float(s[0]), float(s[1])), (float(g[0]), float(g[1])))
         except NoPath:
             continue
-        if p.length_m >= STEP_M * TRIAL_STEPS:
+        if p.length_m >= length_m:
             return resample(p.points, STEP_M)
-    raise RuntimeError("no route of 20 m found on this map")
+    raise SageError(f"no route of {length_m:g} m found on this map (try a smaller --drive-m)")
 
 
 def _poses(route: np.ndarray) -> list[tuple[float, float, float]]:
@@ -56,7 +67,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.bench.planner import drivable_cells
     from sage_robot.core.config import Settings
     from sage_robot.core.geometry import compose, wrap_angle
-    from sage_robot.nav.amcl import ParticleFilter
+    from sage_robot.nav.amcl import ParticleFilter, scan_fit
     from sage_robot.nav.mapdata import load_for
     from sage_robot.sim.raycast import GridRaycaster
 
@@ -97,33 +108,62 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         out[f"update_{n}"] = {"median_ms": round(float(np.median(a)), 2),
                               "p95_ms": round(float(np.percentile(a, 95)), 2),
                               "tracking_error_median_m": round(float(np.median(errs)), 3)}
-    trials = []
+    seeds = [(p.pose.x, p.pose.y) for p in data.places]
+    nav = settings.nav
+    trials: list[dict[str, Any]] = []
+    global_ms: list[float] = []
     for _ in range(args.trials):
-        route = _poses(_route(cm, rng, cells))
+        route = _poses(_route(cm, rng, cells, args.drive_m))
         pf = ParticleFilter(data.grid, rng, settings.nav.min_particles, settings.nav.max_particles, mount,
-                            args.beams)
+                            args.beams, seeds=seeds)
+        _ = pf.region  # computed once per map (the node does it at start-up)
         t = time.perf_counter()
         pf.global_localization((angles, scan(route[0]), 12.0))
         init_s = time.perf_counter() - t
         pf.update(route[0], angles, scan(route[0]), 12.0)  # odometry reference
-        converged_at = None
-        for k, truth in enumerate(route[1:TRIAL_STEPS + 1], start=1):
-            pf.update(truth, angles, scan(truth), 12.0, force=True)
+        correct_from = declared_at = None
+        false_declared = 0
+        steps = route[1:int(args.drive_m / STEP_M) + 1]
+        for k, truth in enumerate(steps, start=1):
+            r = scan(truth)
+            big = pf.count > settings.nav.max_particles
+            t = time.perf_counter()
+            pf.update(truth, angles, r, 12.0, force=True)
+            if big:
+                global_ms.append((time.perf_counter() - t) * 1000)
             e = pf.estimate()
-            ok = (math.hypot(e.x - truth[0], e.y - truth[1]) < CONVERGED_M
-                  and abs(wrap_angle(e.theta - truth[2])) < CONVERGED_RAD and pf.spread_m() < CONVERGED_M)
-            if ok and converged_at is None:
-                converged_at = k
-            elif not ok:
-                converged_at = None
-        trials.append({"init_s": round(init_s, 2),
-                       "converged_after_m": None if converged_at is None else converged_at * STEP_M})
+            right = (math.hypot(e.x - truth[0], e.y - truth[1]) < CONVERGED_M
+                     and abs(wrap_angle(e.theta - truth[2])) < CONVERGED_RAD)
+            # the filter's own verdict, as the navigator reads it from /localization/health
+            fit = scan_fit(pf.field, (e.x, e.y, e.theta), mount, angles, r, 12.0, nav.health_tolerance_m)
+            declared = pf.spread_m() < CONVERGED_M and fit >= DECLARE_FIT
+            if declared and declared_at is None:
+                declared_at = k
+            if declared and not right:
+                false_declared += 1
+            if right and correct_from is None:
+                correct_from = k
+            elif not right:
+                correct_from = None
+        trial: dict[str, Any] = {
+            "init_s": round(init_s, 2),
+            "converged_after_m": None if correct_from is None else correct_from * STEP_M,
+            "declared_after_m": None if declared_at is None else declared_at * STEP_M,
+            "false_declarations": false_declared,
+        }
+        trials.append(trial)
     done = [t["converged_after_m"] for t in trials if t["converged_after_m"] is not None]
     out["global_localization"] = {
         "trials": len(trials),
+        "drive_m": args.drive_m,
         "converged": len(done),
         "median_distance_m": round(float(np.median(done)), 2) if done else None,
+        "max_distance_m": round(float(np.max(done)), 2) if done else None,
         "median_time_s": round(float(np.median(done)) / DRIVE_SPEED_MPS, 1) if done else None,
+        "declared": sum(t["declared_after_m"] is not None for t in trials),
+        "trials_with_false_declaration": sum(t["false_declarations"] > 0 for t in trials),
         "median_init_s": round(float(np.median([t["init_s"] for t in trials])), 2),
+        "global_phase_update_median_ms": round(float(np.median(global_ms)), 2) if global_ms else None,
+        "per_trial": trials,
     }
     return out

@@ -11,8 +11,10 @@
 - Augmented MCL: ``w_slow``/``w_fast`` averages of the measurement likelihood; when the
   short-term fit drops below ``INJECT_RATIO`` of the long-term one, up to
   ``MAX_INJECT_FRACTION`` of the particles are redrawn uniformly over free space.
-- Global localization: candidates over all free space scored against the scan, the best
-  ``max_particles`` kept (a better start than AMCL's uniform draw on a large floor).
+- Global localization (``amcl_global``): a lattice of poses over the reachable free space
+  scored against the scan, the best refined, ``GLOBAL_PARTICLES`` kept; the particle cap
+  stays raised until KLD sampling asks for no more than ``max_particles`` (the cloud has
+  gathered), so several look-alike places stay alive while the robot drives.
 
 Conventions: map frame, metres and radians; particles are an (N, 3) array of
 (x, y, theta); weights sum to 1. Randomness only from the ``numpy.random.Generator``
@@ -29,6 +31,15 @@ from scipy import ndimage
 
 from sage_robot.core.geometry import compose, relative, wrap_angle, wrap_angles
 from sage_robot.core.msgs import OccupancyGrid
+from sage_robot.nav.amcl_global import (
+    Hypothesis,
+    equal_share_weights,
+    global_poses,
+    hypotheses,
+    keep_alive,
+    poses_in,
+    search_region,
+)
 from sage_robot.nav.costmap import OCCUPIED_MIN, GridGeometry
 
 SIGMA_HIT_M = 0.2  # AMCL laser_sigma_hit
@@ -42,15 +53,12 @@ UPDATE_MIN_A_RAD = 0.2  # AMCL update_min_a
 KLD_ERR, KLD_Z = 0.01, 2.326  # pf_err, z of the 0.99 quantile (AMCL pf_z)
 KLD_BIN_M, KLD_BIN_RAD = 0.5, math.radians(10.0)
 ALPHA_SLOW, ALPHA_FAST = 0.001, 0.1  # AMCL recovery_alpha_slow / _fast
-GLOBAL_CANDIDATES = 60_000  # poses scored during global localization
-GLOBAL_HEADINGS = 16
-GLOBAL_BEAMS = 30
+GLOBAL_PARTICLES = 8000  # particle cap right after global localization; KLD brings it back to max
 INIT_SIGMA_XY_M, INIT_SIGMA_YAW_RAD = 0.25, 0.2
 CLUSTER_CELL_M = 0.5  # particles are grouped on this grid to find the heaviest cluster
 CLUSTER_RADIUS_M = 1.0  # the estimate averages particles this close to that cluster
 MAX_INJECT_FRACTION = 0.2  # at most this share of particles is redrawn at random per update
 INJECT_RATIO = 0.8  # inject only once the short-term fit falls below this share of the long-term one
-SPREAD_SHARE = 0.9  # spread_m looks at this share of the particles nearest the estimate
 
 
 @dataclass(frozen=True)
@@ -79,16 +87,22 @@ class LikelihoodField:
         self._width = padded.shape[1]
         self._rows, self._cols = padded.shape
         self._flat_dist = padded.ravel()
-        self._log_tables: dict[float, np.ndarray] = {}
+        self._log_tables: dict[tuple[float, float], np.ndarray] = {}
 
-    def log_p_table(self, range_max: float) -> np.ndarray:
-        """log(z_hit·N(d) + z_rand/range_max) per (padded, flat) cell, cached per range_max."""
-        table = self._log_tables.get(range_max)
+    def log_p_table(self, range_max: float, sigma: float = SIGMA_HIT_M) -> np.ndarray:
+        """log(z_hit·N(d; 0, sigma) + z_rand/range_max) per (padded, flat) cell, cached.
+
+        ``d`` is the distance less one cell: a return on a wall's surface lies on the border
+        of an occupied and a free cell and lands in either by rounding, depending on which
+        way the beam travels. Without the shift a place scored better than its mirror image
+        (a beam from the other side rounds the other way), enough to pick the wrong one of
+        two look-alike wings."""
+        table = self._log_tables.get((range_max, sigma))
         if table is None:
-            d = self._flat_dist
-            p = Z_HIT * np.exp(-0.5 * (d / SIGMA_HIT_M) ** 2) + Z_RAND / range_max
+            d = np.maximum(self._flat_dist - self.geom.resolution, 0.0)
+            p = Z_HIT * np.exp(-0.5 * (d / sigma) ** 2) + Z_RAND / range_max
             table = np.log(p).astype(np.float32)
-            self._log_tables[range_max] = table
+            self._log_tables[(range_max, sigma)] = table
         return table
 
     def flat_index(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -106,21 +120,13 @@ class LikelihoodField:
         out[ok] = self.dist[r[ok], c[ok]]
         return out
 
-    def random_free_poses(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        idx = rng.integers(0, len(self.free_cells), n)
-        rc = self.free_cells[idx].astype(np.float64) + rng.random((n, 2))
-        res = self.geom.resolution
-        return np.column_stack([
-            self.geom.origin_x + rc[:, 1] * res,
-            self.geom.origin_y + rc[:, 0] * res,
-            rng.uniform(-math.pi, math.pi, n),
-        ])
 
 
 def beam_log_likelihood(field: LikelihoodField, poses: np.ndarray, sensor: tuple[float, float, float],
-                        angles: np.ndarray, ranges: np.ndarray, range_max: float) -> np.ndarray:
-    """Sum over beams of log(z_hit·N(d) + z_rand/range_max) for each pose → (N,).
-    ``sensor`` is the lidar's pose in base_link; beams with no return are skipped."""
+                        angles: np.ndarray, ranges: np.ndarray, range_max: float,
+                        sigma: float = SIGMA_HIT_M) -> np.ndarray:
+    """Sum over beams of log(z_hit·N(d; 0, sigma) + z_rand/range_max) for each pose → (N,).
+    ``sensor`` is the lidar's pose in base_link; pass only beams with a return."""
     sx, sy, st = sensor
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     ox = poses[:, 0] + c * sx - s * sy
@@ -131,7 +137,7 @@ def beam_log_likelihood(field: LikelihoodField, poses: np.ndarray, sensor: tuple
     by = (ranges * np.sin(angles)).astype(np.float32)
     ex = ox.astype(np.float32)[:, None] + np.outer(ct, bx) - np.outer(stt, by)
     ey = oy.astype(np.float32)[:, None] + np.outer(stt, bx) + np.outer(ct, by)
-    table = field.log_p_table(range_max)
+    table = field.log_p_table(range_max, sigma)
     return table[field.flat_index(ex, ey)].sum(axis=1, dtype=np.float64)
 
 
@@ -178,12 +184,19 @@ class ParticleFilter:
 
     def __init__(self, grid: OccupancyGrid, rng: np.random.Generator, min_particles: int = 500,
                  max_particles: int = 2000, sensor: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                 beams: int = 60) -> None:
+                 beams: int = 60, seeds: list[tuple[float, float]] | None = None,
+                 global_particles: int = GLOBAL_PARTICLES) -> None:
+        """``seeds``: map points (the places) inside the region the robot can be in; global
+        localization and random particles stay in the free space connected to them."""
         if not 0 < min_particles <= max_particles:
             raise ValueError("need 0 < min_particles <= max_particles")
         self.field = LikelihoodField(grid)
         self.rng = rng
         self.n_min, self.n_max = min_particles, max_particles
+        self.n_global = max(global_particles, max_particles)
+        self._cap = max_particles  # raised to n_global by global localization until the cloud gathers
+        self._seeds = list(seeds) if seeds else None
+        self._region: np.ndarray | None = None
         self.sensor, self.beams = sensor, beams
         self.particles = np.zeros((min_particles, 3))
         self.weights = np.full(min_particles, 1.0 / min_particles)
@@ -202,25 +215,33 @@ class ParticleFilter:
         ])
         self.weights = np.full(n, 1.0 / n)
         self.w_slow = self.w_fast = 0.0
+        self._cap = self.n_max
+
+    @property
+    def region(self) -> np.ndarray:
+        """(row, col) cells the robot's centre may be in (see ``amcl_global.search_region``)."""
+        if self._region is None:
+            self._region = search_region(self.field, self._seeds)
+        return self._region
+
+    def random_poses(self, n: int) -> np.ndarray:
+        """``n`` poses drawn uniformly over :attr:`region`, random headings."""
+        return poses_in(self.field, self.region, n, self.rng)
 
     def global_localization(self, scan: tuple[np.ndarray, np.ndarray, float] | None = None) -> None:
-        """Spread particles over free space. With a scan, score many candidate poses against it
-        and keep the best ``max_particles`` (each cell's headings sampled evenly)."""
+        """Relocalize over the whole map. Without a scan, ``n_global`` poses uniformly over the
+        region (AMCL's way); with one, the ``n_global`` poses that best explain it."""
         if scan is None:
-            self.particles = self.field.random_free_poses(self.n_max, self.rng)
+            self.particles = self.random_poses(self.n_global)
         else:
-            angles, ranges, range_max = self._subsample(*scan, GLOBAL_BEAMS)
-            m = max(1, GLOBAL_CANDIDATES // GLOBAL_HEADINGS)
-            pos = self.field.random_free_poses(m, self.rng)
-            heads = np.linspace(-math.pi, math.pi, GLOBAL_HEADINGS, endpoint=False)
-            cand = np.repeat(pos, GLOBAL_HEADINGS, axis=0)
-            cand[:, 2] = wrap_angles(np.tile(heads, m) + self.rng.uniform(0, 2 * math.pi / GLOBAL_HEADINGS))
-            scores = np.concatenate([
-                beam_log_likelihood(self.field, chunk, self.sensor, angles, ranges, range_max)
-                for chunk in np.array_split(cand, max(1, len(cand) // 8192))
-            ])
-            self.particles = cand[np.argsort(scores)[-self.n_max:]]
-        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
+            a, r, rmax = self._subsample(*scan, len(scan[0]))
+            if len(r) == 0:
+                self.particles = self.random_poses(self.n_global)
+            else:
+                self.particles = global_poses(self.field, self.region, self.n_global, self.sensor,
+                                              a, r, rmax, self.rng)
+        self._cap = self.n_global
+        self.weights = equal_share_weights(self.particles)
         self.w_slow = self.w_fast = 0.0
         self._odom_ref = None
 
@@ -280,20 +301,27 @@ class ParticleFilter:
             self.particles[:, 0] / KLD_BIN_M, self.particles[:, 1] / KLD_BIN_M,
             self.particles[:, 2] / KLD_BIN_RAD])).astype(np.int64)
         k = len(np.unique(_key(bins)))
-        n = kld_count(k, self.n_min, self.n_max)
-        # low-variance (systematic) resampling
+        n = kld_count(k, self.n_min, self._cap)
+        if n <= self.n_max:
+            self._cap = self.n_max  # the cloud has gathered: back to AMCL's max_particles
+        # low-variance (systematic) resampling from q, which keeps runner-up hypotheses alive;
+        # the drawn particles carry weight w/q so each hypothesis keeps its true share
+        q = keep_alive(self.particles, self.weights)
         positions = (self.rng.random() + np.arange(n)) / n
-        idx = np.minimum(np.searchsorted(np.cumsum(self.weights), positions), n_old - 1)
+        idx = np.minimum(np.searchsorted(np.cumsum(q), positions), n_old - 1)
         new = self.particles[idx]
+        w = self.weights[idx] / np.maximum(q[idx], 1e-300)
         p_inject = 0.0
         if self.w_slow > 0:
             p_inject = min(MAX_INJECT_FRACTION, max(0.0, 1.0 - self.w_fast / (INJECT_RATIO * self.w_slow)))
         inject = self.rng.random(n) < p_inject
         if inject.any():
-            new[inject] = self.field.random_free_poses(int(inject.sum()), self.rng)
+            new[inject] = self.random_poses(int(inject.sum()))
             self.injected += int(inject.sum())
+        if inject.any():
+            w[inject] = float(np.mean(w))
         self.particles = new
-        self.weights = np.full(n, 1.0 / n)
+        self.weights = w / w.sum()
 
     # ---------------------------------------------------------------- output
     def estimate(self) -> Estimate:
@@ -310,12 +338,21 @@ class ParticleFilter:
         return _weighted_pose(p[near], w[near])
 
     def spread_m(self) -> float:
-        """Root-mean-square distance (m) from the estimate of the nearest SPREAD_SHARE of the
-        particles: small once the filter has converged, whatever a few random ones do."""
-        e = self.estimate()
-        d = np.sort(np.hypot(self.particles[:, 0] - e.x, self.particles[:, 1] - e.y))
-        k = max(1, int(len(d) * SPREAD_SHARE))
-        return float(np.sqrt(np.mean(d[:k] ** 2)))
+        """How far from converged the cloud is (m): the larger of the weighted root-mean-square
+        distance of the heaviest hypothesis' particles from its centre and the distance from
+        that centre to the farthest other hypothesis. A cloud split between two look-alike
+        places is not converged, however tight each part; lone random particles do not count."""
+        hyps = self.hypotheses()
+        if not hyps:  # no cluster at all: particles scattered everywhere
+            e = self.estimate()
+            d2 = (self.particles[:, 0] - e.x) ** 2 + (self.particles[:, 1] - e.y) ** 2
+            return float(np.sqrt(np.average(d2, weights=self.weights)))
+        best = hyps[0]
+        return max([best.rms_m, *(math.hypot(h.x - best.x, h.y - best.y) for h in hyps[1:])])
+
+    def hypotheses(self) -> list[Hypothesis]:
+        """The places the cloud still considers (see ``amcl_global.hypotheses``), heaviest first."""
+        return hypotheses(self.particles, self.weights)
 
     def pose_at(self, odom: tuple[float, float, float]) -> tuple[float, float, float]:
         """The estimate carried forward by the odometry since the last filter update."""

@@ -4,8 +4,10 @@ Publishes ``/amcl_pose`` (with covariance) after each filter update, the map→o
 correction on ``MAP_ODOM`` after each scan, and ``/localization/health`` (how well the
 scan fits the map at the estimate; lost below ``nav.lost_below``). The initial pose is
 the place ``nav.initial_place``; ``/initialpose`` resets it; the ``GLOBAL_LOCALIZATION``
-service spreads the particles over the whole map (the next few scans update the filter
-even without motion). Filter updates run in a worker thread.
+service relocalizes over the free space connected to the places (``amcl_global``; the next
+few scans update the filter even without motion). Health carries ``spread_m`` and the
+number of ``hypotheses`` still alive: after a global relocalization the cloud is only
+converged when one place is left. Filter updates run in a worker thread.
 """
 
 from __future__ import annotations
@@ -41,8 +43,11 @@ class LocalizationNode(Node):
     async def setup(self) -> None:
         nav, lidar = self.settings.nav, self.settings.robot.lidar
         self.data = load_for(self.settings)
+        seeds = [(p.pose.x, p.pose.y) for p in self.data.places]
         self.pf = ParticleFilter(self.data.grid, np.random.default_rng(nav.seed), nav.min_particles,
-                                 nav.max_particles, (lidar.x_m, lidar.y_m, lidar.yaw_rad), nav.laser_beams)
+                                 nav.max_particles, (lidar.x_m, lidar.y_m, lidar.yaw_rad), nav.laser_beams,
+                                 seeds=seeds)
+        await asyncio.to_thread(lambda: self.pf.region)  # where global localization may look (~0.3 s)
         self._lock = asyncio.Lock()
         self._odom: Pose | None = None
         self._ekf = YawRateEkf() if nav.use_ekf else None
@@ -143,7 +148,8 @@ class LocalizationNode(Node):
             self._scores.append(fit)
         score = float(np.mean(self._scores)) if self._scores else 0.0
         lost = len(self._scores) > 0 and score < nav.lost_below
-        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count, round(self.pf.spread_m(), 3))
+        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count, round(self.pf.spread_m(), 3),
+                                         max(1, len(self.pf.hypotheses())))
         self.bus.publish(topics.LOC_HEALTH, self.health)
 
     async def teardown(self) -> None:

@@ -101,4 +101,5 @@ class LocalizationHealth:
     score: float
     lost: bool
     particles: int = 0
-    spread_m: float = 0.0  # root xy variance of the whole particle cloud (m); small = converged
+    spread_m: float = 0.0  # cloud spread (m), or distance to the farthest other hypothesis; small = converged
+    hypotheses: int = 1  # places the particle cloud still considers (look-alike corridors); 1 = unambiguous
