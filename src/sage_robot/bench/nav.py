@@ -30,6 +30,7 @@ CLUTTER_SIZE_M = (0.6, 0.4)
 CLUTTER_CLEARANCE_M = 1.2  # clutter stays this far from walls and places
 LEG_TIMEOUT_S = 300.0  # simulated seconds per leg before it counts as failed
 SAMPLE_PERIOD_S = 0.2  # localization error sampling (simulated s)
+NEAR_PERSON_M = 5.0  # a failed leg lists the simulated people this close to the robot
 PEOPLE_WAIT_S = 60.0  # the simulator's visitors who walk up to the robot stay 30-60 s
 
 
@@ -266,6 +267,12 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
                "loc_sq_deg": round(float(np.sum(np.square(errs_deg))), 4),
                "hits": [{"kind": h.kind, "name": h.name, "x": round(h.x, 2), "y": round(h.y, 2),
                          "speed_mps": round(h.speed_mps, 2)} for h in hits]}
+        if not ok:  # who was around when it gave up, to tell a crowd from a planner fault
+            rec["robot"] = [round(world.x, 2), round(world.y, 2), round(world.theta, 2)]
+            rec["people_near"] = [
+                {"behaviour": p.behaviour, "x": round(p.x, 2), "y": round(p.y, 2),
+                 "moving": round(p.moving, 2), "d": round(math.hypot(p.x - world.x, p.y - world.y), 2)}
+                for p in world.crowd.people if math.hypot(p.x - world.x, p.y - world.y) < NEAR_PERSON_M]
         records.append(rec)
         keep(rec)
     sampler.cancel()
