@@ -34,7 +34,7 @@ HNSW_EF_CONSTRUCTION = 64  # build-time candidates (pgvector's default)
 # Full-text search ranks at most about this many chunks (the cost of ts_rank is per matching
 # row): the query's words are taken rarest first while the chunks they match add up to this;
 # the rarest word is always taken. Commoner words still count in the rank of the candidates.
-FTS_CANDIDATES = 500
+FTS_CANDIDATES = 1000
 # Per-connection settings: no JIT compilation (it adds tens of ms to a query whose cost
 # estimate passes jit_above_cost and gains nothing on these small queries); no parallel
 # workers (they start processes per query; the robot's computer has few cores); random
