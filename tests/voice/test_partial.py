@@ -81,3 +81,25 @@ def test_partial_interval_must_be_positive(interval_s):
 
     with pytest.raises(ValidationError, match="asr_partial_interval_s"):
         VoiceSettings(asr_partial_interval_s=interval_s)
+
+
+def test_partial_process_runs_at_lower_priority(models, pocketsphinx_data):
+    import os
+
+    from sage_robot.voice.audio_io import load_audio
+    from sage_robot.voice.partial import PARTIAL_NICE
+
+    part = models.stt_partial
+    assert part is not None and part.pid != os.getpid()
+    mine = os.getpriority(os.PRIO_PROCESS, 0)
+    assert os.getpriority(os.PRIO_PROCESS, part.pid) == min(19, mine + PARTIAL_NICE)
+    text = part.transcribe(load_audio(pocketsphinx_data / "goforward.raw")).text.lower()
+    assert "forward" in text
+
+
+def test_partial_model_errors_are_clear():
+    from sage_robot.core.errors import ConfigError
+    from sage_robot.voice.partial import PartialTranscriber
+
+    with pytest.raises(ConfigError, match="STT model 'no-such-model'"):
+        PartialTranscriber("no-such-model")

@@ -34,6 +34,9 @@ WAKE_NOISE_SEED = 11  # clean, then white noise at these signal-to-noise ratios
 BABBLE_SNRS_DB = (10.0, 5.0)  # four other talkers (a busy hallway) at these ratios
 BABBLE_TALKERS = 4
 BABBLE_SEED = 12
+LONG_QUESTIONS = ("Can you tell me where the robotics lab is and whether students work there today?",
+                  "When does the library open on Saturday, and can I bring my friends along?",
+                  "Where is the cafe that sells the good sandwiches near the engineering building?")
 QUESTIONS = ("Where is the library?", "What time does the lab open?", "Who teaches robotics?",
              "Can you take me to the cafe?", "How old is this building?")  # fmt: skip
 NEUTRAL = (
@@ -52,6 +55,8 @@ NEUTRAL = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--turns", type=int, default=6, help="pipeline turns for the reply latency")
+    p.add_argument("--ab-turns", type=int, default=8,
+                   help="long-question turns, partial transcripts on/off in turn (0: skip)")
     p.add_argument("--fa-minutes", type=float, default=10.0, help="minutes of non-wake audio")
     p.add_argument("--quick", action="store_true", help="small sizes (a smoke test)")
 
@@ -243,7 +248,11 @@ def _false_accepts(models: Any, audio: np.ndarray, vs: Any) -> dict[str, Any]:
             "fa_detections": [(d.model, round(d.time_s, 1)) for d in found[:10]]}  # fmt: skip
 
 
-async def _latency(models: Any, settings: Any, speech: Any, turns: int) -> dict[str, Any]:
+async def _turns(models: Any, settings: Any, speech: Any, questions: tuple[str, ...], turns: int,
+                 partial_on: Any = None) -> list[tuple[Any, int, bool]]:  # fmt: skip
+    """Whole turns through the pipeline on the wall clock: (TurnLatency, partials shown, partials
+    on) per turn. ``partial_on(i)`` switches partial transcripts per turn (an A/B under the
+    same machine load); None keeps the profile's choice."""
     from sage_robot.core.bus import Bus
     from sage_robot.core.clock import WallClock
     from sage_robot.core.msgs import Text
@@ -270,19 +279,33 @@ async def _latency(models: Any, settings: Any, speech: Any, turns: int) -> dict[
         return resample(speech.synthesize(text), speech.sample_rate, RATE)
 
     pause = np.zeros(RATE // 2, dtype=np.int16)
+    out = []
     for i in range(turns):
+        if partial_on is not None:
+            pipe.partial_stt = models.stt_partial if partial_on(i) else None
         mic.inject(np.concatenate([pause, say("Hey Jarvis."), pause,
-                                   say(QUESTIONS[i % len(QUESTIONS)]), pause]))  # fmt: skip
+                                   say(questions[i % len(questions)]), pause]))  # fmt: skip
         deadline = time.monotonic() + 60
-        n = len(pipe.latencies)
+        n, shown = len(pipe.latencies), pipe.partials
         while time.monotonic() < deadline and (len(pipe.latencies) == n or pipe.state is not State.IDLE
                                                or mic.pending_s > 0):  # fmt: skip
             await asyncio.sleep(0.05)
+        if len(pipe.latencies) > n:
+            out.append((pipe.latencies[-1], pipe.partials - shown, pipe.partial_stt is not None))
     task.cancel()
     await asyncio.gather(task, return_exceptions=True)
-    delays = [m.reply_delay_s for m in pipe.latencies if m.reply_delay_s == m.reply_delay_s]
-    stt = [m.stt_done - m.end_of_speech for m in pipe.latencies if m.stt_done == m.stt_done]
-    out: dict[str, Any] = {"turns": len(pipe.latencies), "turns_answered": len(delays)}
+    return out
+
+
+def _delays(turns: list[tuple[Any, int, bool]]) -> list[float]:
+    return [m.reply_delay_s for m, _, _ in turns if m.reply_delay_s == m.reply_delay_s]
+
+
+async def _latency(models: Any, settings: Any, speech: Any, turns: int) -> dict[str, Any]:
+    done = await _turns(models, settings, speech, QUESTIONS, turns)
+    delays = _delays(done)
+    stt = [m.stt_done - m.end_of_speech for m, _, _ in done if m.stt_done == m.stt_done]
+    out: dict[str, Any] = {"turns": len(done), "turns_answered": len(delays)}
     if delays:
         out["end_of_speech_to_first_audio_s_median"] = round(statistics.median(delays), 3)
         out["end_of_speech_to_first_audio_s_max"] = round(max(delays), 3)
@@ -290,6 +313,22 @@ async def _latency(models: Any, settings: Any, speech: Any, turns: int) -> dict[
             statistics.median(delays) + settings.vad_silence_s, 3)  # fmt: skip
     if stt:
         out["stt_s_median"] = round(statistics.median(stt), 3)
+    return out
+
+
+async def _partial_ab(models: Any, settings: Any, speech: Any, turns: int) -> dict[str, Any]:
+    """Long questions (4-6 s), partial transcripts on in even turns and off in odd ones."""
+    if models.stt_partial is None:
+        return {}
+    done = await _turns(models, settings, speech, LONG_QUESTIONS, turns, lambda i: i % 2 == 0)
+    on = _delays([t for t in done if t[2]])
+    off = _delays([t for t in done if not t[2]])
+    out: dict[str, Any] = {"long_turns": len(done),
+                           "long_partials_per_turn": round(sum(t[1] for t in done if t[2])
+                                                           / max(1, len(on)), 1)}  # fmt: skip
+    if on and off:
+        out["long_reply_delay_s_median_partials_on"] = round(statistics.median(on), 3)
+        out["long_reply_delay_s_median_partials_off"] = round(statistics.median(off), 3)
     return out
 
 
@@ -309,6 +348,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out.update(_stt(models.stt, models.speech))
     out.update(_tts(models.speech))
     out.update(asyncio.run(_latency(models, settings, models.speech, 2 if args.quick else args.turns)))
+    out["asr_partial"] = settings.asr_partial
+    out.update(asyncio.run(_partial_ab(models, settings, models.speech, 2 if args.quick else args.ab_turns)))
     out["wake_thresholds"] = {n: settings.wake_model_thresholds.get(n, settings.wake_threshold)
                               for n in settings.wake_models}  # fmt: skip
     out["wake_patience"] = {n: settings.wake_model_patience.get(n, settings.wake_patience_frames)
@@ -319,8 +360,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out.update(_false_rejects(models, _white_clips(jarvis), settings))
     talkers = _talkers(models.speech)
     out.update(_false_rejects(models, _babble_clips(jarvis, talkers), settings, prefix="wake_babble"))
-    alexa = _wake_sources(models.speech, ALEXA_PHRASES, args.quick)
-    out.update(_false_rejects(models, _white_clips(alexa), settings, "alexa", prefix="alexa"))
+    if "alexa" in settings.wake_models:
+        alexa = _wake_sources(models.speech, ALEXA_PHRASES, args.quick)
+        out.update(_false_rejects(models, _white_clips(alexa), settings, "alexa", prefix="alexa"))
     minutes = 0.5 if args.quick else args.fa_minutes
     out.update(_false_accepts(models, _non_wake_audio(models.speech, minutes), settings))
     return out

@@ -33,6 +33,7 @@ from sage_robot.core.node import Node
 from sage_robot.core.topics import DOA, SIM_SPEAKER, SIM_VISITOR_AUDIO, SIM_VISITOR_SAY, UI_STATE
 from sage_robot.hardware.doa import FRONT_DEG, XVF3800Doa
 from sage_robot.voice.audio_io import SAMPLE_RATE, resample
+from sage_robot.voice.partial import PartialTranscriber
 from sage_robot.voice.pipeline import VoicePipeline
 from sage_robot.voice.player import Mouth
 from sage_robot.voice.stt import SpeechToText
@@ -43,30 +44,26 @@ from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
 T = TypeVar("T")
 SIM_OUT_DIR_KEY = "voice_sim_out_dir"  # ctx.resources: where the sim speaker writes WAV files
 SIM_AUDIO_KEY = "voice_sim_audio"  # ctx.resources: (SimMicrophone, SimSpeaker) once set up
-PARTIAL_THREADS = 1  # CPU threads of the partial-transcript model (the rest stay for the final)
 
 
 @dataclass
 class VoiceModels:
     """Everything heavy, loaded once: wake engines (microphone and self-hearing), VAD, STT, TTS,
-    and with ``asr_partial`` a second Whisper for the partial transcripts (its own instance on
-    one CPU thread, so it never holds the final transcription's model)."""
+    and with ``asr_partial`` a second Whisper for the partial transcripts (in a low-priority
+    child process, see :mod:`partial`: it never holds the final transcription's model or CPU)."""
 
     wake: OpenWakeWordEngine
     wake_self: OpenWakeWordEngine
     vad: SileroVad
     stt: SpeechToText
     speech: Speech
-    stt_partial: SpeechToText | None = None
+    stt_partial: PartialTranscriber | None = None
 
     @classmethod
     def load(cls, s: VoiceSettings) -> VoiceModels:
         stt = SpeechToText(s.stt_model, s.stt_device, s.stt_compute_type)
         stt.warm_up()
-        partial = None
-        if s.asr_partial:
-            partial = SpeechToText(s.asr_partial_model, "cpu", "int8", cpu_threads=PARTIAL_THREADS)
-            partial.warm_up()
+        partial = PartialTranscriber(s.asr_partial_model) if s.asr_partial else None
         return cls(
             wake=OpenWakeWordEngine(s.wake_models),
             wake_self=OpenWakeWordEngine(s.wake_models),

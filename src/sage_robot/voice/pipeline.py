@@ -6,11 +6,11 @@ maximum length), transcribed, published on ``/sage/heard`` and sent to the brain
 ``converse`` action; each sentence of its streamed feedback is spoken as it arrives.
 After the reply the robot listens ``follow_up_s`` more without a wake word.
 
-While the visitor speaks, every ``asr_partial_interval_s`` of audio the utterance so far
-is re-transcribed by a second Whisper instance (``partial_stt``) in a worker thread and
-shown as ``asr_partial``; a tick is skipped while the previous partial still runs or the
-visitor pauses (the final transcription may be about to start), and partials never hold
-the final model's lock.
+While the visitor speaks, every ``asr_partial_interval_s`` of audio (from
+``PARTIAL_FIRST_S`` on) the utterance so far is re-transcribed by a second Whisper
+(``partial_stt``: a low-priority child process) and shown as ``asr_partial``; a tick is
+skipped while the previous partial still runs or the visitor pauses (the final
+transcription may be about to start); partials never hold the final model or its CPU.
 
 A wake word while the robot thinks or speaks interrupts it (barge-in) — unless the robot
 itself just said something that sounds like the wake word (its reference detector, see
@@ -39,6 +39,7 @@ from sage_robot.core.msgs.nav import NavigateFeedback, NavState
 from sage_robot.core.msgs.voice import Phase, TurnLatency, UiState
 from sage_robot.core.topics import CONVERSE, HEARD, NAV_STATE, SAY, TURN_LATENCY, UI_STATE
 from sage_robot.hardware.audio import Microphone
+from sage_robot.voice.partial import PartialTranscriber
 from sage_robot.voice.player import Mouth
 from sage_robot.voice.stt import SpeechToText, Transcript
 from sage_robot.voice.vad import EndReason, SileroVad, Utterance, UtteranceRecorder
@@ -46,6 +47,8 @@ from sage_robot.voice.wake import Detection, WakeDetector
 
 SELF_ECHO_WINDOW_S = 2.5  # a wake heard this soon after the robot "said" one is its own echo
 EARLY_STT_S = 0.3  # silence after which transcription starts, before the utterance is closed
+PARTIAL_FIRST_S = 2.0  # utterance audio (pre-roll included) before the first partial: a short
+# command gets none (its final comes as soon, and a partial would compete with it for the CPU)
 WAKE_TAIL_S = 0.24  # audio right after a detection is the end of the wake phrase: skipped
 NO_BRAIN = "Sorry, my brain is not running right now."
 BRAIN_FAILED = "Sorry, I could not come up with an answer."
@@ -94,7 +97,7 @@ class VoicePipeline:
         vad: SileroVad,
         stt: SpeechToText,
         log: StructLogger | None = None,
-        partial_stt: SpeechToText | None = None,
+        partial_stt: PartialTranscriber | None = None,
     ) -> None:
         self.bus, self.clock, self.settings, self.mic, self.mouth = bus, clock, settings, mic, mouth
         self.wake, self.vad, self.stt, self.partial_stt = wake, vad, stt, partial_stt
@@ -196,7 +199,8 @@ class VoicePipeline:
         rec = self.recorder
         if self.partial_stt is None or not rec.started or rec.silent_s > 0:
             return
-        if rec.duration_s - self._partial_at_s < self.settings.asr_partial_interval_s - 1e-9:
+        due = max(PARTIAL_FIRST_S, self._partial_at_s + self.settings.asr_partial_interval_s)
+        if rec.duration_s < due - 1e-9:
             return
         self._partial_at_s = rec.duration_s
         if self._partial_task is not None and not self._partial_task.done():
