@@ -48,6 +48,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="JSON lines, one per finished leg; a rerun with the same file skips the legs "
                         "it holds (a long --pairs all run can be done in pieces) and sums them all")
     p.add_argument("--max-legs", type=int, default=0, help="stop after this many new legs (0: all)")
+    p.add_argument("--first-leg", type=int, default=1,
+                   help="start at this leg (1-based) of the circuit: run a long circuit in shards")
+    p.add_argument("--merge", nargs="+", default=[], metavar="LEGS_FILE",
+                   help="drive nothing: sum up the legs in these --legs-file files (shards of one run)")
 
 
 def _circuit(n: int, start: int) -> list[int]:
@@ -107,6 +111,8 @@ def _settings(args: argparse.Namespace) -> Any:
 def run(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.core.errors import ConfigError
 
+    if args.merge:
+        return _merge(args.merge)
     settings, places = _settings(args)
     names = [p.name for p in places]
     rng = np.random.default_rng(args.seed)
@@ -122,9 +128,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         for _ in range(n):
             order.append(int(rng.choice([i for i in range(len(names)) if i != order[-1]])))
     legs = [(names[a], names[b]) for a, b in itertools.pairwise(order)]
+    if not 1 <= args.first_leg <= len(legs):
+        raise ConfigError(f"--first-leg must be between 1 and {len(legs)}, got {args.first_leg}")
+    legs = legs[args.first_leg - 1:]
     clutter = _clutter(settings, args.clutter, rng, places)
     head = {"bench": "nav", "map": settings.nav.map or "default building", "pedestrians": args.pedestrians,
-            "clutter": args.clutter, "seed": args.seed, "speed": args.speed}
+            "clutter": args.clutter, "seed": args.seed, "speed": args.speed, "first_leg": args.first_leg}
     done: list[dict[str, Any]] = _read_legs(args.legs_file, head, legs) if args.legs_file else []
     todo = legs[len(done):]
     if args.max_legs > 0:
@@ -142,6 +151,26 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         done += asyncio.run(_drive_all(settings, todo, clutter, keep))
     wall_s = round(time.perf_counter() - t0, 1)
     return {**head, "legs_planned": len(legs), **summarize(done), "wall_s": wall_s}
+
+
+def _merge(paths: list[str]) -> dict[str, Any]:
+    from sage_robot.core.errors import ConfigError
+
+    records: list[dict[str, Any]] = []
+    for path in paths:
+        try:
+            with open(path, encoding="utf-8") as f:
+                records += [json.loads(ln) for ln in f if ln.strip()]
+        except OSError as exc:
+            raise ConfigError(f"cannot read {path}: {exc.strerror}") from None
+        except ValueError:
+            raise ConfigError(f"{path}: not a --legs-file of JSON lines") from None
+    keys = {(r.get("map"), r.get("pedestrians"), r.get("clutter"), r.get("seed")) for r in records}
+    if len(keys) > 1:
+        raise ConfigError(f"the files hold legs of different runs (map, people, clutter, seed): "
+                          f"{sorted(keys, key=str)}")
+    head = {k: records[0][k] for k in ("map", "pedestrians", "clutter", "seed")} if records else {}
+    return {"bench": "nav", **head, "merged": len(paths), **summarize(records)}
 
 
 def _read_legs(path: str, head: dict[str, Any], legs: list[tuple[str, str]]) -> list[dict[str, Any]]:
