@@ -10,7 +10,7 @@ import numpy as np
 from sage_robot.core.config import Settings
 from sage_robot.core.geometry import wrap_angle
 from sage_robot.nav.amcl import ParticleFilter
-from sage_robot.nav.amcl_global import hypotheses, search_region
+from sage_robot.nav.amcl_global import KEEP_SHARE, hypotheses, keep_alive, search_region
 from sage_robot.nav.mapdata import load_for
 
 from .nav_grids import draw
@@ -79,6 +79,41 @@ def test_hypotheses_count_the_places_a_cloud_considers() -> None:
     assert (round(h[0].x), round(h[0].y)) == (2, 2) and (round(h[1].x), round(h[1].y)) == (20, 9)
     assert 0.55 < h[0].share < 0.62 and 0.36 < h[1].share < 0.42
     assert len(hypotheses(a, np.full(600, 1 / 600))) == 1
+
+
+def test_twins_crossing_the_same_spot_facing_opposite_ways_stay_two_hypotheses() -> None:
+    rng = np.random.default_rng(2)
+    def cloud_at(x: float, heading: float, n: int) -> np.ndarray:
+        return np.column_stack([rng.normal(x, 0.2, n), rng.normal(5.0, 0.2, n), rng.normal(heading, 0.05, n)])
+
+    east, west = cloud_at(5.0, 0.0, 700), cloud_at(5.3, math.pi, 300)
+    cloud = np.vstack([east, west])
+    h = hypotheses(cloud, np.full(1000, 1e-3))
+    assert [round(x.share, 1) for x in h] == [0.7, 0.3]
+
+
+def _two_places(n_leader: int, n_runner: int) -> np.ndarray:
+    rng = np.random.default_rng(4)
+    a = np.column_stack([rng.normal(2.0, 0.1, n_leader), rng.normal(2.0, 0.1, n_leader), np.zeros(n_leader)])
+    b = np.column_stack([rng.normal(30.0, 0.1, n_runner), rng.normal(2.0, 0.1, n_runner), np.zeros(n_runner)])
+    return np.vstack([a, b])
+
+
+def test_keep_alive_holds_a_look_alike_that_fits_as_well_and_drops_one_that_does_not() -> None:
+    cloud = _two_places(1900, 100)
+    w = np.concatenate([np.full(1900, 1.0), np.full(100, 1e-7)])  # runner-up's share: ~5e-9
+    w /= w.sum()
+    runner = np.arange(2000) >= 1900
+    same_fit = np.full(2000, -0.5)  # log-likelihood per beam
+    q, boost = keep_alive(cloud, w, same_fit)
+    assert q[runner].sum() >= KEEP_SHARE - 1e-9  # still drawn: 5 % of the new particles
+    kept = w * boost
+    assert kept[runner].sum() / kept.sum() >= 1e-3  # and held at a share that still counts
+    worse_fit = np.where(runner, -0.8, -0.5)
+    q, boost = keep_alive(cloud, w, worse_fit)
+    assert q[runner].sum() < 1e-6 and np.allclose(boost, 1.0)  # ruled out: let go
+    q, boost = keep_alive(cloud, np.where(runner, 0.2, 1.0) / 400.0)  # a real runner-up (~1 %)
+    assert q[runner].sum() >= KEEP_SHARE - 1e-9 and np.allclose(boost, 1.0)
 
 
 def test_look_alike_places_stay_ambiguous_instead_of_converging_wrongly() -> None:

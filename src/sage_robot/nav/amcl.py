@@ -278,7 +278,7 @@ class ParticleFilter:
             return False
         loglik = beam_log_likelihood(self.field, self.particles, self.sensor, a, r, rmax)
         self._weigh(loglik, len(r))
-        self._resample()
+        self._resample(loglik / len(r))
         self.updates += 1
         return True
 
@@ -295,7 +295,7 @@ class ParticleFilter:
             self.w_slow += ALPHA_SLOW * (w_avg - self.w_slow)
             self.w_fast += ALPHA_FAST * (w_avg - self.w_fast)
 
-    def _resample(self) -> None:
+    def _resample(self, loglik_per_beam: np.ndarray | None = None) -> None:
         n_old = len(self.particles)
         bins = np.floor(np.column_stack([
             self.particles[:, 0] / KLD_BIN_M, self.particles[:, 1] / KLD_BIN_M,
@@ -306,11 +306,11 @@ class ParticleFilter:
             self._cap = self.n_max  # the cloud has gathered: back to AMCL's max_particles
         # low-variance (systematic) resampling from q, which keeps runner-up hypotheses alive;
         # the drawn particles carry weight w/q so each hypothesis keeps its true share
-        q = keep_alive(self.particles, self.weights)
+        q, boost = keep_alive(self.particles, self.weights, loglik_per_beam)
         positions = (self.rng.random() + np.arange(n)) / n
         idx = np.minimum(np.searchsorted(np.cumsum(q), positions), n_old - 1)
         new = self.particles[idx]
-        w = self.weights[idx] / np.maximum(q[idx], 1e-300)
+        w = self.weights[idx] * boost[idx] / np.maximum(q[idx], 1e-300)
         p_inject = 0.0
         if self.w_slow > 0:
             p_inject = min(MAX_INJECT_FRACTION, max(0.0, 1.0 - self.w_fast / (INJECT_RATIO * self.w_slow)))

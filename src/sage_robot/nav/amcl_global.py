@@ -50,10 +50,13 @@ HYPOTHESIS_CELL_M = 1.0  # particles are binned on this grid; touching bins form
 HYPOTHESIS_MIN_SHARE = 1e-3  # a hypothesis holds at least this share of the weight ...
 HYPOTHESIS_MIN_PARTICLES = 10  # ... and this many particles (injected strays do not count)
 HYPOTHESIS_CELL_MIN = 2  # bins with fewer particles (lone injected ones) are ignored
+HEADING_SECTORS = 8  # a place's particles are split into hypotheses by heading (45° sectors)
 KEEP_SHARE = 0.05  # particles each runner-up hypothesis keeps at resampling (share of the cloud) ...
 KEEP_BUDGET = 0.5  # ... while all runner-ups together take at most this share
 KEEP_MIN_WEIGHT = HYPOTHESIS_MIN_SHARE  # a runner-up whose weight share falls below this is let go
 KEEP_MAX = 24  # runner-up hypotheses kept alive at most
+AMBIGUOUS_LL_PER_BEAM = 0.03  # a runner-up whose best particle fits this close to the leader's stays ...
+AMBIGUOUS_SHARE = 2 * HYPOTHESIS_MIN_SHARE  # ... with at least this share of the weight
 CHUNK = 16_384  # poses scored per batch (bounds memory: CHUNK × beams endpoints)
 
 
@@ -164,16 +167,43 @@ class Hypothesis:
 
 
 def _clusters(particles: np.ndarray) -> tuple[np.ndarray, int]:
-    """Cluster label per particle (0: a bin with fewer than ``HYPOTHESIS_CELL_MIN`` particles)
-    and the number of clusters. Particles are binned on ``HYPOTHESIS_CELL_M`` squares;
-    bins that touch (8-connected) form one cluster."""
+    """Cluster label per particle (0: none) and the number of clusters.
+
+    Particles are binned on ``HYPOTHESIS_CELL_M`` squares; bins with at least
+    ``HYPOTHESIS_CELL_MIN`` particles that touch (8-connected) form a place. Within a place,
+    particles are split by heading into ``HEADING_SECTORS`` sectors; runs of occupied
+    sectors (circular) form one cluster each. Two hypotheses that cross (a place and its
+    point-symmetric twin pass through the centre of symmetry facing opposite ways) stay two."""
     xy = particles[:, :2]
     ij = np.floor((xy - xy.min(axis=0)) / HYPOTHESIS_CELL_M).astype(np.int64)
     rows, cols = int(ij[:, 1].max()) + 1, int(ij[:, 0].max()) + 1
     flat = ij[:, 1] * cols + ij[:, 0]
     counts = np.bincount(flat, minlength=rows * cols).reshape(rows, cols)
     labels, n = ndimage.label(counts >= HYPOTHESIS_CELL_MIN, structure=np.ones((3, 3), dtype=bool))
-    return labels.ravel()[flat], int(n)
+    place = labels.ravel()[flat]
+    sector = np.floor((particles[:, 2] + math.pi) / (2 * math.pi / HEADING_SECTORS)).astype(np.int64)
+    sector %= HEADING_SECTORS
+    occupied = np.zeros((n + 1, HEADING_SECTORS), dtype=np.int64)
+    np.add.at(occupied, (place, sector), 1)
+    full = occupied >= HYPOTHESIS_CELL_MIN
+    group = np.zeros((n + 1, HEADING_SECTORS), dtype=np.int64)
+    k = 0
+    for c in range(1, n + 1):
+        row = full[c]
+        if row.all():
+            k += 1
+            group[c] = k
+            continue
+        if not row.any():
+            continue
+        start = int(np.argmin(row))  # an empty sector: runs never wrap past it
+        for j in range(1, HEADING_SECTORS + 1):
+            s = (start + j) % HEADING_SECTORS
+            if row[s]:
+                if not row[(s - 1) % HEADING_SECTORS]:
+                    k += 1
+                group[c, s] = k
+    return group[place, sector], k
 
 
 def hypotheses(particles: np.ndarray, weights: np.ndarray,
@@ -195,28 +225,52 @@ def hypotheses(particles: np.ndarray, weights: np.ndarray,
     return sorted(out, key=lambda h: -h.share)
 
 
-def keep_alive(particles: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Resampling probabilities (sum 1) that give each of the ``KEEP_MAX`` strongest runner-up
-    hypotheses at least ``KEEP_SHARE`` of the new particles while its weight share is above
-    ``KEEP_MIN_WEIGHT`` (less when many are alive: together at most ``KEEP_BUDGET``). The
-    caller weighs the drawn particles by ``weights / probabilities``, so every hypothesis
-    keeps its true weight: a look-alike place that fits a little worse for a while is not
-    resampled away before the robot has seen what tells them apart."""
+def keep_alive(particles: np.ndarray, weights: np.ndarray,
+               loglik_per_beam: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Resampling probabilities ``q`` (sum 1) and per-particle weight factors ``boost``.
+
+    ``q`` gives each of the ``KEEP_MAX`` strongest runner-up hypotheses at least
+    ``KEEP_SHARE`` of the new particles (less when many are alive: together at most
+    ``KEEP_BUDGET``) while it is alive. The caller weighs each drawn particle by
+    ``weights · boost / q``, so a hypothesis keeps its weight: a look-alike place that fits
+    a little worse for a while is not resampled away before the robot has seen what tells
+    them apart. A runner-up is alive while its weight share is at least ``KEEP_MIN_WEIGHT``,
+    or while its best particle explains the scan within ``AMBIGUOUS_LL_PER_BEAM`` (per beam,
+    from ``loglik_per_beam``) of the leader's best: then ``boost`` lifts its share back to
+    ``AMBIGUOUS_SHARE``. Tiny likelihood differences between two places that fit equally
+    well (a map drawn a pixel off, a box that is not on the map) add up over a few updates;
+    they must not decide between look-alike wings."""
     total = max(float(weights.sum()), 1e-300)
+    ones = np.ones(len(weights))
     lab, n = _clusters(particles)
     if n <= 1:
-        return weights / total
+        return weights / total, ones
     share = np.bincount(lab, weights=weights, minlength=n + 1) / total  # [0]: lone particles
-    target = share.copy()
     order = 1 + np.argsort(-share[1:])
-    runners = [c for c in order[1:KEEP_MAX + 1] if share[c] >= KEEP_MIN_WEIGHT]
-    floor = min(KEEP_SHARE, KEEP_BUDGET / max(1, len(runners)))
+    ambiguous = np.zeros(n + 1, dtype=bool)
+    if loglik_per_beam is not None:
+        best = np.full(n + 1, -np.inf)
+        np.maximum.at(best, lab, loglik_per_beam)
+        ambiguous = best >= best[order[0]] - AMBIGUOUS_LL_PER_BEAM
+        ambiguous[0] = False
+    runners = [c for c in order[1:KEEP_MAX + 1] if share[c] >= KEEP_MIN_WEIGHT or ambiguous[c]]
+    post = share.copy()  # the weight share each cluster keeps
     for c in runners:
-        target[c] = max(share[c], floor)
+        post[c] = max(share[c], AMBIGUOUS_SHARE)
+    post /= post.sum()
+    target = post.copy()  # the share of particles each cluster gets
+    floor = min(KEEP_SHARE, KEEP_BUDGET / max(1, len(runners)))
+    held = np.zeros(n + 1, dtype=bool)
+    held[runners] = True
+    target[held] = np.maximum(post[held], floor)
+    rest = float(post[~held].sum())
+    if rest > 0:  # the leader and the others share what the runner-ups leave
+        target[~held] *= max(0.0, 1.0 - float(target[held].sum())) / rest
     target /= target.sum()
     factor = np.divide(target, share, out=np.ones_like(share), where=share > 0)
+    boost = np.divide(post, share, out=np.ones_like(share), where=share > 0)
     q = weights * factor[lab]
-    return q / q.sum()
+    return q / q.sum(), boost[lab]
 
 
 def equal_share_weights(particles: np.ndarray) -> np.ndarray:
