@@ -22,7 +22,8 @@ POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")
 
 @pytest.fixture(scope="session")
 def voice_settings() -> VoiceSettings:
-    return VoiceSettings(tts_deterministic=True)
+    # Both bundled models: the default profile has hey_jarvis only, alexa is opt-in.
+    return VoiceSettings(tts_deterministic=True, wake_models=("hey_jarvis", "alexa"))
 
 
 @pytest.fixture(scope="session")

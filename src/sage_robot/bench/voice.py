@@ -26,6 +26,7 @@ FRAME = 1280  # 80 ms
 POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")
 WAKE_PHRASES = ("Hey Jarvis.", "Hey Jarvis, where is the lab?")
 ALEXA_PHRASES = ("Alexa.", "Alexa, where is the lab?")
+WAKE_MODELS = ("hey_jarvis", "alexa")  # scored: the profile's hey_jarvis and the opt-in alexa
 PIPER_SPEEDS = (0.8, 0.9, 1.0, 1.15, 1.3)  # length scales: < 1 faster
 ESPEAK_VOICES = ("en-us", "en-us+f3", "en-gb", "en-us+m3")
 ESPEAK_RATES = (140, 175)  # words per minute
@@ -181,7 +182,7 @@ def _talkers(speech: Any) -> list[np.ndarray]:
     return out
 
 
-def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], vs: Any, model: str = "hey_jarvis",
+def _false_rejects(engine: Any, clips: list[tuple[str, np.ndarray]], vs: Any, model: str = "hey_jarvis",
                    prefix: str = "wake") -> dict[str, Any]:  # fmt: skip
     """Clips (1 s of silence either side) in which ``model`` is not detected."""
     from sage_robot.voice.wake import WakeDetector
@@ -189,8 +190,8 @@ def _false_rejects(models: Any, clips: list[tuple[str, np.ndarray]], vs: Any, mo
     pad = np.zeros(RATE, dtype=np.int16)
     missed = []
     for name, pcm in clips:
-        models.wake.reset()
-        det = WakeDetector.from_settings(models.wake, vs)
+        engine.reset()
+        det = WakeDetector.from_settings(engine, vs)
         if model not in {d.model for d in det.feed(np.concatenate([pad, pcm, pad]))}:
             missed.append(name)
     return {f"{prefix}_clips": len(clips), f"{prefix}_false_rejects": len(missed),
@@ -236,13 +237,16 @@ def _non_wake_audio(speech: Any, minutes: float) -> np.ndarray:
     return np.concatenate([x for p in parts for x in (p, gap)])[:want]
 
 
-def _false_accepts(models: Any, audio: np.ndarray, vs: Any) -> dict[str, Any]:
+def _false_accepts(engine: Any, audio: np.ndarray, vs: Any, profile_models: Any) -> dict[str, Any]:
+    """Detections over non-wake audio: by the profile's models, and by ``alexa`` apart."""
     from sage_robot.voice.wake import WakeDetector
 
-    models.wake.reset()
-    det = WakeDetector.from_settings(models.wake, vs)
+    engine.reset()
+    det = WakeDetector.from_settings(engine, vs)
     found = det.feed(audio)
-    return {"fa_audio_min": round(len(audio) / RATE / 60, 2), "wake_false_accepts": len(found),
+    return {"fa_audio_min": round(len(audio) / RATE / 60, 2),
+            "wake_false_accepts": sum(d.model in profile_models for d in found),
+            "alexa_false_accepts": sum(d.model == "alexa" for d in found),
             "fa_max_scores": {k: round(v, 3) for k, v in det.max_scores.items()},
             "fa_max_smoothed": {k: round(v, 3) for k, v in det.max_smoothed.items()},
             "fa_detections": [(d.model, round(d.time_s, 1)) for d in found[:10]]}  # fmt: skip
@@ -338,6 +342,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     from sage_robot.core.config.areas import VoiceSettings
     from sage_robot.voice.node import VoiceModels
+    from sage_robot.voice.wake import OpenWakeWordEngine
 
     settings = VoiceSettings(tts_deterministic=False)
     t0 = time.perf_counter()
@@ -350,19 +355,23 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out.update(asyncio.run(_latency(models, settings, models.speech, 2 if args.quick else args.turns)))
     out["asr_partial"] = settings.asr_partial
     out.update(asyncio.run(_partial_ab(models, settings, models.speech, 2 if args.quick else args.ab_turns)))
-    out["wake_thresholds"] = {n: settings.wake_model_thresholds.get(n, settings.wake_threshold)
-                              for n in settings.wake_models}  # fmt: skip
-    out["wake_patience"] = {n: settings.wake_model_patience.get(n, settings.wake_patience_frames)
-                            for n in settings.wake_models}  # fmt: skip
-    out["wake_smoothing"] = {n: settings.wake_model_smoothing.get(n, settings.wake_smoothing_frames)
-                             for n in settings.wake_models}  # fmt: skip
+    # The profile's hey_jarvis and the opt-in alexa, scored together (models are independent).
+    both = settings.model_copy(update={"wake_models": WAKE_MODELS})
+    engine = OpenWakeWordEngine(WAKE_MODELS)
+    out["wake_models"] = list(settings.wake_models)
+    out["wake_thresholds"] = {n: both.wake_model_thresholds.get(n, both.wake_threshold)
+                              for n in WAKE_MODELS}  # fmt: skip
+    out["wake_patience"] = {n: both.wake_model_patience.get(n, both.wake_patience_frames)
+                            for n in WAKE_MODELS}  # fmt: skip
+    out["wake_smoothing"] = {n: both.wake_model_smoothing.get(n, both.wake_smoothing_frames)
+                             for n in WAKE_MODELS}  # fmt: skip
     jarvis = _wake_sources(models.speech, WAKE_PHRASES, args.quick)
-    out.update(_false_rejects(models, _white_clips(jarvis), settings))
+    out.update(_false_rejects(engine, _white_clips(jarvis), both))
     talkers = _talkers(models.speech)
-    out.update(_false_rejects(models, _babble_clips(jarvis, talkers), settings, prefix="wake_babble"))
-    if "alexa" in settings.wake_models:
-        alexa = _wake_sources(models.speech, ALEXA_PHRASES, args.quick)
-        out.update(_false_rejects(models, _white_clips(alexa), settings, "alexa", prefix="alexa"))
+    out.update(_false_rejects(engine, _babble_clips(jarvis, talkers), both, prefix="wake_babble"))
+    alexa = _wake_sources(models.speech, ALEXA_PHRASES, args.quick)
+    out.update(_false_rejects(engine, _white_clips(alexa), both, "alexa", prefix="alexa"))
     minutes = 0.5 if args.quick else args.fa_minutes
-    out.update(_false_accepts(models, _non_wake_audio(models.speech, minutes), settings))
+    out.update(_false_accepts(engine, _non_wake_audio(models.speech, minutes), both,
+                              settings.wake_models))  # fmt: skip
     return out

@@ -68,7 +68,8 @@ class VoiceSettings(Section):
         "auto", description="'auto' (sim mic in simulation, else the real mic), 'mic' or 'sim'."
     )
     wake_models: tuple[str, ...] = Field(
-        ("hey_jarvis", "alexa"), description="Bundled names or .onnx paths (several at once)."
+        ("hey_jarvis",),
+        description="Bundled names or .onnx paths (several at once; 'alexa' also fires on 'Alex s...').",
     )
     wake_threshold: float = Field(0.6, ge=0, le=1, description="Wake-word score threshold.")
     wake_refractory_s: float = Field(
