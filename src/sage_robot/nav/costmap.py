@@ -9,7 +9,8 @@ Conventions
   centre here means touching), 254 lethal, 255 unknown.
 - Inflation (Nav2 ``InflationLayer``): at distance ``d`` from the nearest lethal cell,
   ``d <= inscribed``: 253; ``d <= inflation_radius``: ``252 * exp(-k (d - inscribed))``.
-  Obstacles seen by the scan (not in the map) count ``OBSTACLE_PAD_M`` nearer.
+  Obstacles seen by the scan (not in the map) count ``OBSTACLE_PAD_M`` nearer; scan hits
+  within ``WALL_SNAP_M`` of a mapped wall are the wall and are not marked.
 """
 
 from __future__ import annotations
@@ -34,6 +35,10 @@ NO_SPEED_LIMIT = 1.0
 # Scan obstacles are padded by this much: a lidar at knee height sees a person's legs
 # (~0.07 m circles 0.11 m either side of the body's centre), not the 0.25 m body around them.
 OBSTACLE_PAD_M = 0.2
+# Scan hits this close to a wall of the map are that wall, seen from a pose a few centimetres
+# off (localization is never exact): they are not marked, or the pad above would thicken the
+# walls and box a robot in where it stands near one.
+WALL_SNAP_M = 0.1
 
 
 @dataclass(frozen=True)
@@ -121,6 +126,9 @@ class Costmap:
         self.keepout = np.zeros(geom.shape, bool) if keepout is None else keepout.astype(bool)
         self.speed = np.full(geom.shape, NO_SPEED_LIMIT, np.float32) if speed is None else speed
         self.obstacles = np.zeros(geom.shape, dtype=bool)
+        snap = max(1, round(WALL_SNAP_M / geom.resolution))
+        disk = np.hypot(*np.mgrid[-snap:snap + 1, -snap:snap + 1]) <= snap
+        self.wall_zone = ndimage.binary_dilation(self.static, structure=disk)  # where hits are walls
         base = self.static | self.keepout
         self._base_cost, self._base_dist = inflate(base, geom.resolution, inscribed_m, inflation_m,
                                                    cost_scaling)
@@ -192,7 +200,7 @@ class Costmap:
         hr, hc = self.geom.to_cell(sx + ca[mark] * r[mark], sy + sa[mark] * r[mark])
         ok = self.geom.inside(hr, hc)
         self.obstacles[hr[ok], hc[ok]] = True
-        self.obstacles &= ~self.static  # walls belong to the static layer
+        self.obstacles &= ~self.wall_zone  # walls belong to the static layer
         if forget_beyond_m is not None:
             self._forget_outside(sx, sy, forget_beyond_m)
         self.refresh()
