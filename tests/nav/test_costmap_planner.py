@@ -56,12 +56,15 @@ def test_obstacle_layer_marks_and_raytrace_clears() -> None:
 
 def test_scan_hits_on_a_mapped_wall_seen_from_a_slightly_wrong_pose_are_the_wall() -> None:
     cm = Costmap.from_grid(room(6.0, 4.0), 0.25, 0.55, 3.0)
-    before = cm.cost.copy()
+    wall_x = 5.95  # the east wall's face
+    assert cm.distance_at(wall_x - 0.5, 2.0) == pytest.approx(0.5, abs=0.05)
     angles = np.linspace(-0.5, 0.5, 41)
-    true_ranges = (5.95 - 1.0) / np.cos(angles)  # the east wall from (1, 2)
+    true_ranges = (wall_x - 1.0) / np.cos(angles)  # the east wall from (1, 2)
     cm.update_scan((0.93, 2.0, 0.0), angles, true_ranges, 12.0)  # localization 7 cm off
-    assert not cm.obstacles.any()
-    assert np.array_equal(cm.cost, before)  # the walls did not grow by the scan pad
+    assert cm.obstacles.any()  # the scan's wall is kept: relative to the robot it is exact
+    # ... but not thickened like legs: a robot 0.5 m from where the scan puts the wall is free
+    assert cm.distance_at(wall_x - 0.07 - 0.5, 2.0) > 0.5 - 0.05 - 0.08
+    assert cm.cost_at(wall_x - 0.07 - 0.5, 2.0)[()] < INSCRIBED
     # a person 0.3 m from that wall is still an obstacle
     cm.update_scan((1.0, 2.0, 0.0), np.array([0.0]), np.array([4.6]), 12.0)
     assert cm.cost_at(5.6, 2.0)[()] == LETHAL

@@ -10,7 +10,7 @@ Conventions
 - Inflation (Nav2 ``InflationLayer``): at distance ``d`` from the nearest lethal cell,
   ``d <= inscribed``: 253; ``d <= inflation_radius``: ``252 * exp(-k (d - inscribed))``.
   Obstacles seen by the scan (not in the map) count ``OBSTACLE_PAD_M`` nearer; scan hits
-  within ``WALL_SNAP_M`` of a mapped wall are the wall and are not marked.
+  within ``WALL_SNAP_M`` of a mapped wall are that wall and count only ``WALL_PAD_M`` nearer.
 """
 
 from __future__ import annotations
@@ -36,9 +36,11 @@ NO_SPEED_LIMIT = 1.0
 # (~0.07 m circles 0.11 m either side of the body's centre), not the 0.25 m body around them.
 OBSTACLE_PAD_M = 0.2
 # Scan hits this close to a wall of the map are that wall, seen from a pose a few centimetres
-# off (localization is never exact): they are not marked, or the pad above would thicken the
-# walls and box a robot in where it stands near one.
+# off (localization is never exact). They stay marked (relative to the robot the scan is the
+# truest wall there is) but get only WALL_PAD_M: the legs' pad would thicken the walls by
+# 0.2 m and box in a robot stopped near a corner.
 WALL_SNAP_M = 0.1
+WALL_PAD_M = 0.05  # about a cell: where in its cell the wall really is
 
 
 @dataclass(frozen=True)
@@ -128,7 +130,7 @@ class Costmap:
         self.obstacles = np.zeros(geom.shape, dtype=bool)
         snap = max(1, round(WALL_SNAP_M / geom.resolution))
         disk = np.hypot(*np.mgrid[-snap:snap + 1, -snap:snap + 1]) <= snap
-        self.wall_zone = ndimage.binary_dilation(self.static, structure=disk)  # where hits are walls
+        self.wall_zone = ndimage.binary_dilation(self.static, structure=disk)  # hits here are walls
         base = self.static | self.keepout
         self._base_cost, self._base_dist = inflate(base, geom.resolution, inscribed_m, inflation_m,
                                                    cost_scaling)
@@ -200,7 +202,7 @@ class Costmap:
         hr, hc = self.geom.to_cell(sx + ca[mark] * r[mark], sy + sa[mark] * r[mark])
         ok = self.geom.inside(hr, hc)
         self.obstacles[hr[ok], hc[ok]] = True
-        self.obstacles &= ~self.wall_zone  # walls belong to the static layer
+        self.obstacles &= ~self.static  # walls belong to the static layer
         if forget_beyond_m is not None:
             self._forget_outside(sx, sy, forget_beyond_m)
         self.refresh()
@@ -232,12 +234,15 @@ class Costmap:
         pad = math.ceil(self.inflation_m / self.geom.resolution) + 1
         r0, r1 = max(rr.min() - pad, 0), min(rr.max() + pad + 1, self.geom.shape[0])
         c0, c1 = max(cc.min() - pad, 0), min(cc.max() + pad + 1, self.geom.shape[1])
-        lethal = self.obstacles[r0:r1, c0:c1]
-        cost, dist = inflate(lethal, self.geom.resolution, self.inscribed_m + OBSTACLE_PAD_M,
-                             self.inflation_m + OBSTACLE_PAD_M, self.cost_scaling)
-        dist = np.maximum(dist - OBSTACLE_PAD_M, 0.0)
-        self.cost[r0:r1, c0:c1] = np.maximum(self.cost[r0:r1, c0:c1], cost)
-        self.dist[r0:r1, c0:c1] = np.minimum(self.dist[r0:r1, c0:c1], dist)
+        lethal, wall = self.obstacles[r0:r1, c0:c1], self.wall_zone[r0:r1, c0:c1]
+        for marks, pad in ((lethal & ~wall, OBSTACLE_PAD_M), (lethal & wall, WALL_PAD_M)):
+            if not marks.any():
+                continue
+            cost, dist = inflate(marks, self.geom.resolution, self.inscribed_m + pad,
+                                 self.inflation_m + pad, self.cost_scaling)
+            dist = np.maximum(dist - pad, 0.0)
+            self.cost[r0:r1, c0:c1] = np.maximum(self.cost[r0:r1, c0:c1], cost)
+            self.dist[r0:r1, c0:c1] = np.minimum(self.dist[r0:r1, c0:c1], dist)
 
     # ------------------------------------------------------------------ queries
     def cost_at(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:
