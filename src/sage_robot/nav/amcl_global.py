@@ -258,15 +258,12 @@ def keep_alive(particles: np.ndarray, weights: np.ndarray,
     for c in runners:
         post[c] = max(share[c], AMBIGUOUS_SHARE)
     post /= post.sum()
-    target = post.copy()  # the share of particles each cluster gets
+    # the share of particles each cluster gets: its weight share, topped up to the floor for
+    # runner-ups; the top-ups (at most KEEP_BUDGET in all) come from everyone in proportion
     floor = min(KEEP_SHARE, KEEP_BUDGET / max(1, len(runners)))
-    held = np.zeros(n + 1, dtype=bool)
-    held[runners] = True
-    target[held] = np.maximum(post[held], floor)
-    rest = float(post[~held].sum())
-    if rest > 0:  # the leader and the others share what the runner-ups leave
-        target[~held] *= max(0.0, 1.0 - float(target[held].sum())) / rest
-    target /= target.sum()
+    extra = np.zeros(n + 1)
+    extra[runners] = np.maximum(floor - post[runners], 0.0)
+    target = post * (1.0 - float(extra.sum())) + extra
     factor = np.divide(target, share, out=np.ones_like(share), where=share > 0)
     boost = np.divide(post, share, out=np.ones_like(share), where=share > 0)
     q = weights * factor[lab]
