@@ -26,6 +26,7 @@ FRAME = 1280  # 80 ms
 POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")
 WAKE_PHRASES = ("Hey Jarvis.", "Hey Jarvis, where is the lab?")
 ALEXA_PHRASES = ("Alexa.", "Alexa, where is the lab?")
+PARTIAL_ROUNDS = 5  # final transcriptions alone / with a partial running
 WAKE_MODELS = ("hey_jarvis", "alexa")  # scored: the profile's hey_jarvis and the opt-in alexa
 PIPER_SPEEDS = (0.8, 0.9, 1.0, 1.15, 1.3)  # length scales: < 1 faster
 ESPEAK_VOICES = ("en-us", "en-us+f3", "en-gb", "en-us+m3")
@@ -320,6 +321,34 @@ async def _latency(models: Any, settings: Any, speech: Any, turns: int) -> dict[
     return out
 
 
+def _partial_contention(models: Any, rounds: int) -> dict[str, Any]:
+    """The final transcription of ``goforward.raw`` alone and with a partial transcript
+    running at the same time (started 50 ms before), alternately: what a partial costs the
+    reply, with little of the load noise of whole turns."""
+    import threading
+
+    from sage_robot.voice.audio_io import load_audio
+
+    clip = POCKETSPHINX / "goforward.raw"
+    if models.stt_partial is None or not clip.is_file() or rounds <= 0:
+        return {}
+    pcm = load_audio(clip)
+    alone, shared = [], []
+    for _ in range(rounds):
+        t0 = time.perf_counter()
+        models.stt.transcribe(pcm, True)
+        alone.append(time.perf_counter() - t0)
+        th = threading.Thread(target=models.stt_partial.transcribe, args=(pcm, True))
+        th.start()
+        time.sleep(0.05)
+        t0 = time.perf_counter()
+        models.stt.transcribe(pcm, True)
+        shared.append(time.perf_counter() - t0)
+        th.join()
+    return {"final_stt_s_median_alone": round(statistics.median(alone), 3),
+            "final_stt_s_median_with_partial": round(statistics.median(shared), 3)}  # fmt: skip
+
+
 async def _partial_ab(models: Any, settings: Any, speech: Any, turns: int) -> dict[str, Any]:
     """Long questions (4-6 s), partial transcripts on in even turns and off in odd ones."""
     if models.stt_partial is None:
@@ -354,6 +383,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out.update(_tts(models.speech))
     out.update(asyncio.run(_latency(models, settings, models.speech, 2 if args.quick else args.turns)))
     out["asr_partial"] = settings.asr_partial
+    out.update(_partial_contention(models, 2 if args.quick else PARTIAL_ROUNDS))
     out.update(asyncio.run(_partial_ab(models, settings, models.speech, 2 if args.quick else args.ab_turns)))
     # The profile's hey_jarvis and the opt-in alexa, scored together (models are independent).
     both = settings.model_copy(update={"wake_models": WAKE_MODELS})
