@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from sage_robot.sim.people import PERSON_RADIUS_M, ROBOT_GAP_M, Crowd, PersonState
+from sage_robot.sim.people import PERSON_RADIUS_M, ROBOT_GAP_M, TURN_BACK_S, Crowd, Lanes, PersonState
 
 ROBOT_X_M = 5.0
 ROBOT_RADIUS_M = 0.25
@@ -42,3 +42,21 @@ def test_a_walker_waits_when_the_robot_fills_the_corridor_or_drives() -> None:
     assert narrow.x < ROBOT_X_M
     moving, _ = _walk(2.0, 1.3, robot_speed=0.5)  # a driving robot steers around people itself
     assert moving.x < ROBOT_X_M
+
+
+def test_a_walker_on_the_lanes_turns_back_when_the_robot_fills_the_corridor() -> None:
+    # a 1 m corridor along y = 0.5 from (0, 0.5) to (10, 0.5); the robot stands in it at x = 5
+    lanes = Lanes([[0.0, 0.5], [10.0, 0.5]], [[0, 1, 0.4]])
+    p = PersonState(0, 2.0, 0.5, behaviour="walker", speed_mps=1.0, node=1, prev_node=0, route=[(10.0, 0.5)])
+    crowd = Crowd([p], lanes, lambda x, y: min(y, 1.0 - y), np.random.default_rng(0))
+    robot = (ROBOT_X_M, 0.5, 0.0)
+    stuck_at, westmost, closest = None, math.inf, math.inf
+    for k in range(int((TURN_BACK_S + 7.0) / DT_S)):
+        crowd.step(DT_S, k * DT_S, robot, ROBOT_RADIUS_M)
+        if stuck_at is None and p.moving == 0.0:
+            stuck_at = p.x
+        westmost = min(westmost, p.x)
+        closest = min(closest, math.hypot(p.x - robot[0], p.y - robot[1]))
+    assert stuck_at is not None and stuck_at < ROBOT_X_M  # it waited in front of the robot first
+    assert westmost < stuck_at - 3.0  # then walked back the way it came
+    assert closest >= PERSON_RADIUS_M + ROBOT_RADIUS_M + ROBOT_GAP_M - 1e-6

@@ -6,7 +6,9 @@ given, so a seed gives the same crowd and the same walk. Map frame, metres, radi
 
 People see the robot: a walker steps aside when the robot is ahead of it, walks around a
 robot that stands still (keeping its distance) and otherwise waits rather than walk into
-it, so every contact between the two is the robot's doing.
+it, so every contact between the two is the robot's doing. A walker on the lanes kept
+waiting ``TURN_BACK_S`` (the robot fills a doorway) turns back the way it came, as people
+do; scenario patrols keep waiting.
 People do not avoid each other (the lidar sees them all the same).
 """
 
@@ -30,6 +32,7 @@ ROBOT_GAP_M = 0.15  # a person never moves closer than this to the robot's body
 AVOID_LOOKAHEAD_M = 1.5  # a walker steps aside when the robot is this close ahead
 SIDESTEP_MPS = 0.5
 ROBOT_HALTED_MPS = 0.05  # a walker goes around a robot slower than this instead of waiting
+TURN_BACK_S = 10.0  # a walker kept waiting this long by a robot with no room to pass turns back
 STAND_S = (4.0, 15.0)  # a walker who stops stands this long
 STOP_PROBABILITY = 0.15  # chance a walker stops at each waypoint
 APPROACH_STOP_M = 1.0  # the approacher stops this far from the robot's centre
@@ -65,6 +68,7 @@ class PersonState:
     planned: bool = False  # approacher: route to the robot chosen
     fixed: bool = False  # scenario person with a fixed patrol (no lanes)
     patrol: list[tuple[float, float]] = field(default_factory=list)
+    waited_s: float = 0.0  # walker: how long the robot has kept it waiting
 
 
 class Lanes:
@@ -265,6 +269,15 @@ class Crowd:
         p.route.append((float(target[0]), float(target[1])))
         p.prev_node, p.node = p.node, b
 
+    def _turn_back(self, p: PersonState) -> None:
+        """Give up waiting for the robot: back along the lane it came by (walkers on lanes)."""
+        p.waited_s = 0.0
+        if p.behaviour != "walker" or p.patrol or self.lanes is None or p.prev_node < 0:
+            return
+        back = self.lanes.nodes[p.prev_node]
+        p.route = [(float(back[0]), float(back[1]))]
+        p.prev_node, p.node = p.node, p.prev_node
+
     def _random_free(self, p: PersonState) -> tuple[float, float]:
         for _ in range(50):
             x = p.x + float(self.rng.uniform(-8, 8))
@@ -334,8 +347,12 @@ class Crowd:
             around = self._around_halted_robot(p, ux, uy, step, robot, keep)
             if around is None:
                 p.moving = 0.0  # would walk into the robot: wait
+                p.waited_s += dt
+                if p.waited_s >= TURN_BACK_S:
+                    self._turn_back(p)
                 return
             nx, ny = around
+        p.waited_s = 0.0
         if not self._free(nx, ny):
             # Blocked by a wall: slide along it (the larger axis of the move first); if that
             # fails too, give up this waypoint.
