@@ -276,13 +276,18 @@ class GoalRun:
                 return
 
     def _path_free(self, points: np.ndarray) -> bool:
-        """Whether the intended path, from the robot on, is free in the global costmap with the
-        latest scan marked (ray tracing clears where people were), and the controller's forward
-        check on the local costmap would let the robot start. Runs in a worker thread."""
+        """Whether the intended path, from the robot on, is free in the global costmap as the
+        latest scan shows it, and the controller's forward check on the local costmap would let
+        the robot start. Runs in a worker thread.
+
+        Older scan marks are dropped first: a standing robot's beams always take the same
+        lines, so a passer-by marked between two of them (beams 1 degree apart are 5 cm apart
+        at 3 m) would never be cleared and would hold the robot for the whole wait."""
         node = self.node
         pose = node.pose()
         if pose is None:
             return False
+        node.global_cm.clear_obstacles()
         node.refresh_global()
         d = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
         ahead = points[int(np.argmin(d)):]
