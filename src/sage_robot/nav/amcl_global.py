@@ -55,7 +55,7 @@ KEEP_SHARE = 0.05  # particles each runner-up hypothesis keeps at resampling (sh
 KEEP_BUDGET = 0.5  # ... while all runner-ups together take at most this share
 KEEP_MIN_WEIGHT = HYPOTHESIS_MIN_SHARE  # a runner-up whose weight share falls below this is let go
 KEEP_MAX = 24  # runner-up hypotheses kept alive at most
-AMBIGUOUS_LL_PER_BEAM = 0.03  # a runner-up whose best particle fits this close to the leader's stays ...
+AMBIGUOUS_LL_PER_BEAM = 0.06  # a runner-up whose best particle fits this close to the leader's stays ...
 AMBIGUOUS_SHARE = 2 * HYPOTHESIS_MIN_SHARE  # ... with at least this share of the weight
 CHUNK = 16_384  # poses scored per batch (bounds memory: CHUNK × beams endpoints)
 
