@@ -6,9 +6,9 @@ given, so a seed gives the same crowd and the same walk. Map frame, metres, radi
 
 People see the robot: a walker steps aside when the robot is ahead of it, walks around a
 robot that stands still (keeping its distance) and otherwise waits rather than walk into
-it, so every contact between the two is the robot's doing. A walker on the lanes kept
-waiting ``TURN_BACK_S`` (the robot fills a doorway) turns back the way it came, as people
-do; scenario patrols keep waiting.
+it, so every contact between the two is the robot's doing. A walker on the lanes held up
+at the robot for ``TURN_BACK_S`` (waiting, or circling it without getting by: the robot
+fills a doorway) turns back the way it came, as people do; scenario patrols keep waiting.
 People do not avoid each other (the lidar sees them all the same).
 """
 
@@ -32,7 +32,8 @@ ROBOT_GAP_M = 0.15  # a person never moves closer than this to the robot's body
 AVOID_LOOKAHEAD_M = 1.5  # a walker steps aside when the robot is this close ahead
 SIDESTEP_MPS = 0.5
 ROBOT_HALTED_MPS = 0.05  # a walker goes around a robot slower than this instead of waiting
-TURN_BACK_S = 10.0  # a walker kept waiting this long by a robot with no room to pass turns back
+TURN_BACK_S = 10.0  # a walker held up this long at a robot (no room to pass) turns back
+HELD_UP_M = 0.5  # ... held up: within this of the gap it keeps from the robot
 STAND_S = (4.0, 15.0)  # a walker who stops stands this long
 STOP_PROBABILITY = 0.15  # chance a walker stops at each waypoint
 APPROACH_STOP_M = 1.0  # the approacher stops this far from the robot's centre
@@ -68,7 +69,7 @@ class PersonState:
     planned: bool = False  # approacher: route to the robot chosen
     fixed: bool = False  # scenario person with a fixed patrol (no lanes)
     patrol: list[tuple[float, float]] = field(default_factory=list)
-    waited_s: float = 0.0  # walker: how long the robot has kept it waiting
+    waited_s: float = 0.0  # walker: how long it has been held up at the robot (s)
 
 
 class Lanes:
@@ -331,6 +332,15 @@ class Crowd:
         if dist < 1e-6:
             return
         ux, uy = dx / dist, dy / dist
+        if p.behaviour == "walker" and math.hypot(robot[0] - p.x, robot[1] - p.y) < (
+            PERSON_RADIUS_M + rr + ROBOT_GAP_M + HELD_UP_M
+        ):
+            p.waited_s += dt  # held up at the robot: waiting, or circling it without getting by
+            if p.waited_s >= TURN_BACK_S:
+                self._turn_back(p)
+                return
+        else:
+            p.waited_s = 0.0
         step = min(p.speed_mps * dt, dist)
         vx, vy = ux * step, uy * step
         rx, ry = robot[0] - p.x, robot[1] - p.y
@@ -347,12 +357,8 @@ class Crowd:
             around = self._around_halted_robot(p, ux, uy, step, robot, keep)
             if around is None:
                 p.moving = 0.0  # would walk into the robot: wait
-                p.waited_s += dt
-                if p.waited_s >= TURN_BACK_S:
-                    self._turn_back(p)
                 return
             nx, ny = around
-        p.waited_s = 0.0
         if not self._free(nx, ny):
             # Blocked by a wall: slide along it (the larger axis of the move first); if that
             # fails too, give up this waypoint.
