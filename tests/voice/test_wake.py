@@ -204,7 +204,7 @@ def test_profile_alexa_wakes_on_alexa_not_on_alex(models, voice_settings, say16k
 
 
 def test_profile_detector_no_wake_on_neutral_and_noise(models, voice_settings, say16k):
-    """The profile's per-model settings (hey_jarvis 0.2 on a 5-frame mean) stay silent on
+    """The profile's per-model settings (hey_jarvis 0.25 on a 5-frame mean) stay silent on
     other speech and noise, and still hear an espeak-ng "hey jarvis" in noise."""
     from sage_robot.bench.voice import _noisy
     from sage_robot.voice.tts import EspeakEngine

@@ -82,7 +82,7 @@ class VoiceSettings(Section):
         1, ge=1, description="80 ms frames whose scores are averaged before the threshold."
     )
     wake_model_thresholds: dict[str, float] = Field(
-        default_factory=lambda: {"hey_jarvis": 0.2, "alexa": 0.8},
+        default_factory=lambda: {"hey_jarvis": 0.25, "alexa": 0.8},
         description="Per-model score thresholds overriding wake_threshold (model name → 0..1).",
     )
     wake_model_patience: dict[str, int] = Field(
