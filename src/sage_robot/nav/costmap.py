@@ -231,9 +231,9 @@ class Costmap:
         if not self.obstacles.any():
             return
         rr, cc = np.nonzero(self.obstacles)
-        pad = math.ceil(self.inflation_m / self.geom.resolution) + 1
-        r0, r1 = max(rr.min() - pad, 0), min(rr.max() + pad + 1, self.geom.shape[0])
-        c0, c1 = max(cc.min() - pad, 0), min(cc.max() + pad + 1, self.geom.shape[1])
+        margin = math.ceil((self.inflation_m + OBSTACLE_PAD_M) / self.geom.resolution) + 1  # cells
+        r0, r1 = max(rr.min() - margin, 0), min(rr.max() + margin + 1, self.geom.shape[0])
+        c0, c1 = max(cc.min() - margin, 0), min(cc.max() + margin + 1, self.geom.shape[1])
         lethal, wall = self.obstacles[r0:r1, c0:c1], self.wall_zone[r0:r1, c0:c1]
         for marks, pad in ((lethal & ~wall, OBSTACLE_PAD_M), (lethal & wall, WALL_PAD_M)):
             if not marks.any():
