@@ -63,6 +63,7 @@ class LocalizationNode(Node):
         else:
             p = self.data.places.get(nav.initial_place).pose
             self.pf.set_pose(p.x, p.y, p.theta)
+        self._cloud = await asyncio.to_thread(self._cloud_stats)
         self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=50)
         if self._ekf is not None:
             self.subscribe(topics.IMU, Imu, self._on_imu, maxsize=50)
@@ -93,6 +94,7 @@ class LocalizationNode(Node):
         async with self._lock:
             self.pf.set_pose(msg.pose.x, msg.pose.y, msg.pose.theta, sxy, syaw)
             self.pf._odom_ref = None
+            self._cloud = await asyncio.to_thread(self._cloud_stats)
             self._scores.clear()
             self._forced = FORCED_UPDATES_AFTER_RESET
         self.log.info("initial pose set", x=round(msg.pose.x, 2), y=round(msg.pose.y, 2))
@@ -116,6 +118,7 @@ class LocalizationNode(Node):
             if self._global_pending:
                 self._global_pending = False
                 await asyncio.to_thread(self.pf.global_localization, (angles, ranges, scan.range_max))
+                self._cloud = await asyncio.to_thread(self._cloud_stats)
                 self._forced, self._scores = FORCED_UPDATES_AFTER_RESET, deque(maxlen=HEALTH_WINDOW)
                 self.log.info("global localization started", particles=self.pf.count)
             now = self.clock.now()
@@ -128,12 +131,18 @@ class LocalizationNode(Node):
                     self._forced -= 1
                     self._last_forced = now
                 if updated:
+                    self._cloud = await asyncio.to_thread(self._cloud_stats)
                     self._publish_pose(scan.stamp)
             pose = self.pf.pose_at(odom)
         self._map_pose = pose
         correction = compose(pose, inverse(odom))
         self.bus.publish(topics.MAP_ODOM, PoseStamped(scan.stamp, "map", Pose2D(*correction)))
         self._publish_health(scan, pose, angles, ranges)
+
+    def _cloud_stats(self) -> tuple[float, int]:
+        """Spread (m) and hypothesis count of the cloud: it changes only with filter updates,
+        so this runs once per update, in the worker thread, not on every scan."""
+        return self.pf.spread_m(), max(1, len(self.pf.hypotheses()))
 
     def _publish_pose(self, stamp: float) -> None:
         e = self.pf.estimate()
@@ -148,8 +157,8 @@ class LocalizationNode(Node):
             self._scores.append(fit)
         score = float(np.mean(self._scores)) if self._scores else 0.0
         lost = len(self._scores) > 0 and score < nav.lost_below
-        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count, round(self.pf.spread_m(), 3),
-                                         max(1, len(self.pf.hypotheses())))
+        spread, hypotheses = self._cloud
+        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count, round(spread, 3), hypotheses)
         self.bus.publish(topics.LOC_HEALTH, self.health)
 
     async def teardown(self) -> None:
