@@ -258,13 +258,13 @@ class GoalRun:
         """Stop, say so, and watch the intended (obstacle-free) path until it clears."""
         node = self.node
         node.stop()
+        self._cleared = False  # (an early return below must let the ladder climb on)
         try:
             intended = await self._plan(with_obstacles=False)
         except Blocked:
             return
         self.feedback(NavState.WAITING_FOR_PEOPLE)
         node.event("blocked_by_people", "excuse me, may I pass?", place=self.target.name)
-        self._cleared = False
         t0, before = self.clock.now(), self._waited_s
         wait_s = node.settings.nav.people_wait_s - before
         while self.clock.now() - t0 < wait_s:
