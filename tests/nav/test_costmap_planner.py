@@ -8,7 +8,16 @@ import numpy as np
 import pytest
 
 from sage_robot.core.mapio import read_map
-from sage_robot.nav.costmap import INSCRIBED, LETHAL, MAX_NON_OBSTACLE, NO_INFORMATION, Costmap, inflate
+from sage_robot.nav.costmap import (
+    INSCRIBED,
+    LETHAL,
+    MAX_NON_OBSTACLE,
+    NO_INFORMATION,
+    OBSTACLE_PAD_M,
+    WALL_PAD_M,
+    Costmap,
+    inflate,
+)
 from sage_robot.nav.planner import NoPath, path_length, plan
 
 from .nav_grids import draw, room
@@ -63,7 +72,7 @@ def test_scan_hits_on_a_mapped_wall_seen_from_a_slightly_wrong_pose_are_the_wall
     cm.update_scan((0.93, 2.0, 0.0), angles, true_ranges, 12.0)  # localization 7 cm off
     assert cm.obstacles.any()  # the scan's wall is kept: relative to the robot it is exact
     # ... but not thickened like legs: a robot 0.5 m from where the scan puts the wall is free
-    assert cm.distance_at(wall_x - 0.07 - 0.5, 2.0) > 0.5 - 0.05 - 0.08
+    assert cm.distance_at(wall_x - 0.07 - 0.5, 2.0) > 0.5 - WALL_PAD_M - 0.08 > 0.5 - OBSTACLE_PAD_M - 0.08
     assert cm.cost_at(wall_x - 0.07 - 0.5, 2.0)[()] < INSCRIBED
     # a person 0.3 m from that wall is still an obstacle
     cm.update_scan((1.0, 2.0, 0.0), np.array([0.0]), np.array([4.6]), 12.0)

@@ -37,10 +37,11 @@ NO_SPEED_LIMIT = 1.0
 OBSTACLE_PAD_M = 0.2
 # Scan hits this close to a wall of the map are that wall, seen from a pose a few centimetres
 # off (localization is never exact). They stay marked (relative to the robot the scan is the
-# truest wall there is) but get only WALL_PAD_M: the legs' pad would thicken the walls by
-# 0.2 m and box in a robot stopped near a corner.
+# truest wall there is) with WALL_PAD_M: the legs' 0.2 m boxed in a robot stopped near a
+# corner; 0.05 m let paths hug corners so closely that the forward check stopped the robot
+# there (dock -> cafe: blocked 4 times in 4); 0.1 m still boxed in at a junction.
 WALL_SNAP_M = 0.1
-WALL_PAD_M = 0.05  # about a cell: where in its cell the wall really is
+WALL_PAD_M = 0.15  # walls get a thinner pad than legs, and still a margin for the pose error
 
 
 @dataclass(frozen=True)

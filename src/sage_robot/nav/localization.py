@@ -40,6 +40,11 @@ MIN_INITIAL_SIGMA_YAW_RAD = 0.05
 class LocalizationNode(Node):
     name = "localization"
 
+    async def _prepare_region(self) -> None:
+        """Where global localization may look (~0.3 s of CPU), worked out after start-up so the
+        node is running (and tracking from its initial place) meanwhile."""
+        await asyncio.to_thread(lambda: self.pf.region)
+
     async def setup(self) -> None:
         nav, lidar = self.settings.nav, self.settings.robot.lidar
         self.data = load_for(self.settings)
@@ -47,7 +52,6 @@ class LocalizationNode(Node):
         self.pf = ParticleFilter(self.data.grid, np.random.default_rng(nav.seed), nav.min_particles,
                                  nav.max_particles, (lidar.x_m, lidar.y_m, lidar.yaw_rad), nav.laser_beams,
                                  seeds=seeds)
-        await asyncio.to_thread(lambda: self.pf.region)  # where global localization may look (~0.3 s)
         self._lock = asyncio.Lock()
         self._odom: Pose | None = None
         self._ekf = YawRateEkf() if nav.use_ekf else None
@@ -71,6 +75,7 @@ class LocalizationNode(Node):
         self._scans = self.subscribe(topics.SCAN, LaserScan, maxsize=1)
         self.bus.serve(topics.GLOBAL_LOCALIZATION, self._global_service)
         self.spawn(self._scan_loop(), "localization.scans")
+        self.spawn(self._prepare_region(), "localization.region")
 
     # ------------------------------------------------------------ inputs
     def _on_odom(self, msg: Odometry) -> None:
