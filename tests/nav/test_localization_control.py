@@ -9,7 +9,7 @@ import pytest
 
 from sage_robot.core.geometry import wrap_angle
 from sage_robot.nav.amcl import ParticleFilter, kld_count, sample_odometry, scan_fit
-from sage_robot.nav.controller import ControllerParams, PurePursuit
+from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_heading
 from sage_robot.nav.costmap import Costmap
 from sage_robot.nav.ekf import YawRateEkf
 from sage_robot.nav.planner import plan
@@ -171,3 +171,17 @@ def test_speed_zone_limits_speed(grid) -> None:
     cm.speed[:] = 0.25
     _, cmds, _ = _follow(grid, (1.0, 6.0, 0.0), (9.0, 6.0), None, costmap=cm)
     assert max(c.v for c in cmds) <= 0.2 + 1e-9
+
+
+def test_escape_heading_leads_away_from_a_wall_the_robot_is_too_close_to(grid) -> None:
+    cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0)
+    pose = (5.0, 0.7, 0.0)  # 0.2 m from the bottom wall: inside the 0.25 m inscribed radius
+    assert cm.distance_at(5.0, 0.7) < cm.inscribed_m
+    heading = escape_heading(cm, pose, 0.5, prefer=0.0)
+    assert heading is not None and 0.0 < heading < math.pi  # away from the wall (+y)
+    dist = [cm.distance_at(5.0 + s * math.cos(heading), 0.7 + s * math.sin(heading)) for s in (0.1, 0.3, 0.5)]
+    assert dist == sorted(dist) and dist[-1] > cm.inscribed_m
+    # of the headings that leave, the one nearer the preferred direction wins
+    left = escape_heading(cm, pose, 0.5, prefer=math.pi)
+    assert left is not None and left > heading
+

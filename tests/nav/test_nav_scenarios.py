@@ -132,3 +132,20 @@ async def test_initial_pose_can_be_set_at_run_time(tmp_path) -> None:
         await wait_until(clock, lambda: not health[-1].lost and health[-1].score > 0.8, 10, "a good fit")
         where = await bus.call(topics.WHERE_AM_I, Text(""))
         assert where.nearest_place == "HERE" and where.localized and where.distance_m < 0.3
+
+
+async def test_steps_away_from_a_corner_it_stopped_too_close_to(tmp_path) -> None:
+    """The all-pairs benchmark left the robot stopped at this junction, 0.17 m (padded) from a
+    door jamb: every forward arc toward the path got closer, and it never reverses. It turns
+    toward open floor, creeps clear, and goes on."""
+    settings = Settings()
+    grid = read_map(map_yaml(settings))
+    goal = load_for(settings).places.get("HEAT_POWER_LAB").pose.as_tuple()
+    start = (50.85, 41.3, -0.75)
+    path = write_building(tmp_path, grid, {"START": start, "HEAT_POWER_LAB": goal})
+    async with running(settings_for(path, "START"), grid, start) as (bus, _clock, sim):
+        handle = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place="heat power lab"))
+        result = await asyncio.wait_for(handle.result(), 2 * REAL_TIMEOUT_S)
+        assert result.ok, result.message
+        assert math.hypot(sim.pose[0] - goal[0], sim.pose[1] - goal[1]) <= GOAL_TOLERANCE_TRUTH_M
+        assert sim.collisions == 0 and not sim.reversed_commands()

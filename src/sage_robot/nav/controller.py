@@ -171,3 +171,34 @@ class PurePursuit:
             return False
         closer = np.array([costmap.distance_at(px, py) < here - 1e-3 for px, py in arr[hit]])
         return bool(closer.any() or here > costmap.inscribed_m)
+
+
+ESCAPE_STEP_RAD = math.radians(15.0)  # headings tried when stepping away from an obstacle
+ESCAPE_SAMPLE_M = 0.05  # spacing of the distance samples along a tried heading (m)
+ESCAPE_MIN_GAIN_M = 0.05  # a heading must take the robot at least this much further away (m)
+ESCAPE_TURN_PENALTY_M = 0.05  # per pi of turn away from the preferred heading (m)
+
+
+def escape_heading(costmap: Costmap, pose: tuple[float, float, float], reach_m: float,
+                   prefer: float | None = None) -> float | None:
+    """The heading (map frame, rad) in which driving straight for ``reach_m`` takes the robot
+    furthest from the nearest obstacle without ever bringing it closer; ``None`` when no
+    heading gains ``ESCAPE_MIN_GAIN_M``. Ties go to the heading nearest ``prefer``.
+
+    Used when the robot stands inside an obstacle's inscribed radius (the forward check then
+    stops every arc that gets closer): a round robot can turn where it stands and leave."""
+    x, y, _ = pose
+    here = costmap.distance_at(x, y)
+    steps = np.arange(1, round(reach_m / ESCAPE_SAMPLE_M) + 1) * ESCAPE_SAMPLE_M
+    best, best_score = None, -math.inf
+    for heading in np.arange(-math.pi, math.pi, ESCAPE_STEP_RAD):
+        d = np.array([costmap.distance_at(x + s * math.cos(heading), y + s * math.sin(heading))
+                      for s in steps])
+        if (d < here - 1e-3).any() or d[-1] < here + ESCAPE_MIN_GAIN_M:
+            continue
+        turn = abs(wrap_angle(float(heading) - prefer)) if prefer is not None else 0.0
+        score = float(d[-1]) - ESCAPE_TURN_PENALTY_M * turn / math.pi
+        if score > best_score:
+            best, best_score = float(heading), score
+    return best
+

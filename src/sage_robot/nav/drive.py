@@ -12,6 +12,10 @@ collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
 4. spin in place (a full turn refreshes the costmaps), replan;
 5. abort with a reason a person understands.
 
+Before each rung, a robot that stands within the inscribed radius of an obstacle (the
+forward check stops every arc that gets closer, and it never reverses) first turns toward
+open floor and creeps clear (at most ``STEP_AWAY_M``).
+
 From step 3 on (waiting for people has failed), a robot within ``SETTLE_NEAR_GOAL_M`` of
 the goal settles there instead (succeeded, with a note: people stand at the spot).
 
@@ -37,7 +41,7 @@ from sage_robot.core.errors import ServiceError
 from sage_robot.core.geometry import wrap_angle
 from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.nav import NavigateFeedback, NavigateResult, NavState
-from sage_robot.nav.controller import ControllerParams, PurePursuit
+from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_heading
 from sage_robot.nav.planner import NoPath, Plan, path_blocked, plan
 
 if TYPE_CHECKING:
@@ -58,6 +62,12 @@ ETA_MIN_SPEED_MPS = 0.3
 SETTLE_NEAR_GOAL_M = 3.5  # with the goal itself taken by people, this close counts as arrived (m);
 #   a standing person stops the robot 2.4-3.1 m away (legs padding, inscribed radius, forward check)
 KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
+STEP_AWAY_M = 0.5  # longest step away from an obstacle the robot stands too close to (m)
+STEP_AWAY_CLEAR_M = 0.05  # step away until this much beyond the inscribed radius (m)
+STEP_AWAY_SPEED_MPS = 0.15
+STEP_AWAY_TURN_RADPS = 0.6
+STEP_AWAY_ALIGNED_RAD = 0.1  # turned toward the escape heading within this (rad)
+STEP_AWAY_SLACK = 3.0  # time allowed: this many times the time the step should take
 
 
 @dataclass(frozen=True)
@@ -227,6 +237,7 @@ class GoalRun:
             if note:
                 return note
         self.feedback(NavState.RECOVERING)
+        await self._step_away()
         if level == 0:
             self.node.clear_costmaps()
             await self.clock.sleep(CLEAR_SETTLE_S)
@@ -297,6 +308,39 @@ class GoalRun:
         local = node.local_cm
         return len(ahead) < 2 or local is None or \
             not PurePursuit(ahead, self.params, self.target.pose[2]).step(pose, local).blocked
+
+    async def _step_away(self) -> None:
+        """Standing within the inscribed radius of an obstacle (every arc toward the path gets
+        closer, so the forward check stops it, and the robot never reverses): turn toward the
+        heading that leads away, and creep until clear, at most STEP_AWAY_M."""
+        node, pose = self.node, self.pose()
+        cm = node.local_cm
+        if cm is None or cm.distance_at(pose[0], pose[1]) >= cm.inscribed_m:
+            return
+        gx, gy, _ = self.target.pose
+        heading = escape_heading(cm, pose, STEP_AWAY_M, math.atan2(gy - pose[1], gx - pose[0]))
+        if heading is None:
+            return
+        budget_s = STEP_AWAY_SLACK * (math.pi / STEP_AWAY_TURN_RADPS + STEP_AWAY_M / STEP_AWAY_SPEED_MPS)
+        t_end = self.clock.now() + budget_s
+        while abs(err := wrap_angle(heading - self.pose()[2])) > STEP_AWAY_ALIGNED_RAD \
+                and self.clock.now() < t_end:
+            node.command(0.0, math.copysign(STEP_AWAY_TURN_RADPS, err))
+            await self.clock.sleep(self.dt)
+        x0, y0 = pose[0], pose[1]
+        while self.clock.now() < t_end:
+            x, y, th = self.pose()
+            cm = node.local_cm or cm
+            here = cm.distance_at(x, y)
+            ahead = cm.distance_at(x + 0.1 * math.cos(th), y + 0.1 * math.sin(th))
+            if here >= cm.inscribed_m + STEP_AWAY_CLEAR_M or math.hypot(x - x0, y - y0) >= STEP_AWAY_M \
+                    or ahead < here - 1e-3:
+                break
+            node.command(STEP_AWAY_SPEED_MPS, 0.0)
+            await self.clock.sleep(self.dt)
+        node.stop()
+        x, y, _ = self.pose()
+        node.log.info("stepped away from an obstacle", moved_m=round(math.hypot(x - x0, y - y0), 2))
 
     async def _spin(self, angle: float, speed: float) -> None:
         turned, last = 0.0, self.pose()[2]
