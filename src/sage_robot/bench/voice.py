@@ -102,13 +102,14 @@ def _tts(speech: Any) -> dict[str, Any]:
             "tts_first_audio_s_median": round(statistics.median(firsts), 3)}  # fmt: skip
 
 
-def _frame_cpu(models: Any) -> dict[str, Any]:
+def _frame_cpu(models: Any, settings: Any) -> dict[str, Any]:
+    """The profile's wake detector (both paths with ``wake_denoise``) and the VAD."""
     from sage_robot.voice.wake import WakeDetector
 
     rng = np.random.default_rng(3)
     x = rng.normal(0, 300, FRAME * 200).astype(np.int16)
     models.wake.reset()
-    det = WakeDetector(models.wake)
+    det = WakeDetector.from_settings(models.wake, settings)
     models.vad.reset()
     c0, t0 = time.process_time(), time.perf_counter()
     for i in range(200):
@@ -378,7 +379,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     models = VoiceModels.load(settings)
     out: dict[str, Any] = {"bench": "voice", "load_s": round(time.perf_counter() - t0, 2),
                            "cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 1)}
-    out.update(_frame_cpu(models))
+    out.update(_frame_cpu(models, settings))
     out.update(_stt(models.stt, models.speech))
     out.update(_tts(models.speech))
     out.update(asyncio.run(_latency(models, settings, models.speech, 2 if args.quick else args.turns)))
@@ -395,6 +396,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                             for n in WAKE_MODELS}  # fmt: skip
     out["wake_smoothing"] = {n: both.wake_model_smoothing.get(n, both.wake_smoothing_frames)
                              for n in WAKE_MODELS}  # fmt: skip
+    out["wake_denoise"] = settings.wake_denoise
+    out["wake_denoise_thresholds"] = dict(settings.wake_denoise_thresholds)
     jarvis = _wake_sources(models.speech, WAKE_PHRASES, args.quick)
     out.update(_false_rejects(engine, _white_clips(jarvis), both))
     talkers = _talkers(models.speech)

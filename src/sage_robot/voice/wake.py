@@ -8,6 +8,10 @@ is a bundled model; a path ending in ``.onnx`` is a custom model (e.g. the seed'
 Scores do not depend on how the audio is chunked: :class:`WakeDetector` re-cuts any
 stream into exact 80 ms frames before the engine sees it, and the engine's feature
 buffers start from a fixed (seeded) state.
+
+With ``denoised`` the detector has a second path: the same frames through a streaming
+stationary-noise suppressor (:mod:`sage_robot.voice.denoise`) into a twin engine, with
+its own thresholds; a model is detected when either path passes.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import numpy as np
 
 from sage_robot.core.errors import ConfigError
 from sage_robot.voice.audio_io import FRAME_S, FRAME_SAMPLES, Framer, to_int16
+from sage_robot.voice.denoise import NoiseSuppressor
 
 WARMUP_SAMPLES = 16000 * 4  # 4 s: openWakeWord's feature history at start-up
 WARMUP_SEED = 1234  # seeds the start-up history so every run scores the same
@@ -31,6 +36,7 @@ WARMUP_AMPLITUDE = 1000  # int16 peak of that start-up noise (openWakeWord's val
 DEFAULT_REFRACTORY_S = 2.0
 DEFAULT_PATIENCE = 2  # frames in a row over threshold: a real wake word gives 5-14, a spike 1
 DEFAULT_SMOOTHING = 1  # frames averaged before the threshold (1: the frame's own score)
+DENOISED_SUFFIX = "/denoised"  # key suffix of the second path's scores in max_scores etc.
 
 
 class WakeEngine(Protocol):
@@ -117,7 +123,15 @@ class OpenWakeWordEngine:
         rng = np.random.default_rng(WARMUP_SEED)
         warm = rng.integers(-WARMUP_AMPLITUDE, WARMUP_AMPLITUDE, WARMUP_SAMPLES).astype(np.int16)
         self._initial_features = pre._get_embeddings(warm)
+        self._specs = tuple(specs)
+        self._twin: OpenWakeWordEngine | None = None
         self.reset()
+
+    def twin(self) -> OpenWakeWordEngine:
+        """A second engine with the same models and its own audio history (made once)."""
+        if self._twin is None:
+            self._twin = OpenWakeWordEngine(self._specs)
+        return self._twin
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -157,6 +171,12 @@ class WakeDetector:
     threshold (isolated one-frame spikes on words like "Alex" are not wake words).
     After a detection the same model is ignored for ``refractory_s`` (the score stays
     high for several frames while the phrase ends; one utterance is one detection).
+
+    ``denoised`` (an engine of the same models with its own state) adds the second path:
+    frames through a :class:`NoiseSuppressor` (16 ms later) into it, smoothed and
+    patient the same way, against ``denoised_thresholds`` (only the models named there;
+    None: every model at its first-path threshold). Its scores appear under
+    ``name + DENOISED_SUFFIX``.
     """
 
     def __init__(
@@ -170,8 +190,16 @@ class WakeDetector:
         model_patience: Mapping[str, int] | None = None,
         smoothing: int = DEFAULT_SMOOTHING,
         model_smoothing: Mapping[str, int] | None = None,
+        denoised: WakeEngine | None = None,
+        denoised_thresholds: Mapping[str, float] | None = None,
     ) -> None:
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
+        if denoised is not None and set(denoised.names) != set(engine.names):
+            raise ValueError(f"the denoised path needs the same models: {denoised.names}")
+        self.denoised = denoised
+        self.suppressor = NoiseSuppressor() if denoised is not None else None
+        if denoised is not None:
+            denoised.reset()  # the second path starts fresh, like its suppressor
         self.patience = patience
         # Per model (name → value); models not named use ``threshold`` / ``patience``.
         self.thresholds = {n: (model_thresholds or {}).get(n, threshold) for n in engine.names}
@@ -181,8 +209,11 @@ class WakeDetector:
             for name, p in [("", patience if what == "patience" else smoothing), *values.items()]:
                 if p < 1:
                     raise ValueError(f"{what} must be >= 1 frame, got {p} {name}".rstrip())
-        self._recent: dict[str, deque[float]] = {n: deque(maxlen=k) for n, k in self.smoothings.items()}
-        for name, th in self.thresholds.items():
+        self._recent: dict[str, deque[float]] = {}  # last scores per path key
+        self.denoised_thresholds = {} if denoised is None else dict(self.thresholds) \
+            if denoised_thresholds is None \
+            else {n: th for n, th in denoised_thresholds.items() if n in engine.names}  # fmt: skip
+        for name, th in [*self.thresholds.items(), *self.denoised_thresholds.items()]:
             if not 0 <= th <= 1:
                 raise ValueError(f"wake threshold of {name} must be in 0..1, got {th}")
         self._run: dict[str, int] = {}  # frames in a row over threshold, per model
@@ -191,18 +222,27 @@ class WakeDetector:
         self._framer = Framer(FRAME_SAMPLES)
         self.frames = 0
         self._last: dict[str, float] = {}
-        self.max_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)  # raw frame scores
-        self.max_smoothed: dict[str, float] = dict.fromkeys(engine.names, 0.0)
+        self.max_scores: dict[str, float] = dict.fromkeys(self._keys(), 0.0)  # raw frame scores
+        self.max_smoothed: dict[str, float] = dict.fromkeys(self._keys(), 0.0)
         self.last_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
+
+    def _keys(self) -> list[str]:
+        keys = list(self.engine.names)
+        return keys + [n + DENOISED_SUFFIX for n in self.denoised_thresholds]
 
     @classmethod
     def from_settings(cls, engine: WakeEngine, s: Any, threshold: float | None = None) -> WakeDetector:
-        """The profile's detector (``voice`` settings); ``threshold`` overrides every model's."""
+        """The profile's detector (``voice`` settings); ``threshold`` overrides every model's.
+
+        With ``s.wake_denoise`` the second path runs on ``engine.twin()`` (an engine
+        without ``twin`` gets none)."""
+        twin = getattr(engine, "twin", None) if s.wake_denoise else None
         return cls(engine, s.wake_threshold if threshold is None else threshold,
                    s.wake_refractory_s, patience=s.wake_patience_frames,
                    model_thresholds=s.wake_model_thresholds if threshold is None else None,
                    model_patience=s.wake_model_patience, smoothing=s.wake_smoothing_frames,
-                   model_smoothing=s.wake_model_smoothing)  # fmt: skip
+                   model_smoothing=s.wake_model_smoothing, denoised=twin() if twin else None,
+                   denoised_thresholds=s.wake_denoise_thresholds if threshold is None else None)  # fmt: skip
 
     @property
     def time_s(self) -> float:
@@ -210,14 +250,16 @@ class WakeDetector:
 
     def reset(self) -> None:
         self.engine.reset()
+        if self.denoised is not None and self.suppressor is not None:
+            self.denoised.reset()
+            self.suppressor.reset()
         self._framer.reset()
         self.frames = 0
         self._last.clear()
         self._run.clear()
-        for recent in self._recent.values():
-            recent.clear()
-        self.max_scores = dict.fromkeys(self.engine.names, 0.0)
-        self.max_smoothed = dict.fromkeys(self.engine.names, 0.0)
+        self._recent.clear()
+        self.max_scores = dict.fromkeys(self._keys(), 0.0)
+        self.max_smoothed = dict.fromkeys(self._keys(), 0.0)
 
     def feed(self, chunk: np.ndarray) -> list[Detection]:
         """Push audio; returns the detections completed by it."""
@@ -228,25 +270,35 @@ class WakeDetector:
 
     def feed_frame(self, frame: np.ndarray) -> list[Detection]:
         scores = self.engine.score(frame)
+        paths = [(scores, "", self.thresholds)]
+        if self.denoised is not None and self.suppressor is not None:
+            clean = self.suppressor.process(frame)  # a whole frame in, a whole frame out
+            paths.append((self.denoised.score(clean), DENOISED_SUFFIX, self.denoised_thresholds))
         self.frames += 1
         self.last_scores = scores
         if self.keep_scores:
             self.scores.append(scores)
         found = []
         t = self.time_s
-        for name, raw in scores.items():
-            self.max_scores[name] = max(self.max_scores.get(name, 0.0), raw)
-            recent = self._recent.setdefault(name, deque(maxlen=1))
-            recent.append(raw)
-            s = sum(recent) / len(recent)  # the mean of the last ``smoothing`` frames
-            self.max_smoothed[name] = max(self.max_smoothed.get(name, 0.0), s)
-            over = s >= self.thresholds.get(name, self.threshold)
-            self._run[name] = self._run.get(name, 0) + 1 if over else 0
-            if self._run[name] < self.patiences.get(name, self.patience):
+        for name in scores:
+            passed = [s for sc, suffix, ths in paths if name in ths
+                      and (s := self._path(name, name + suffix, sc[name], ths)) is not None]  # fmt: skip
+            if not passed:
                 continue
             last = self._last.get(name)
             if last is not None and t - last < self.refractory_s:
                 continue
             self._last[name] = t
-            found.append(Detection(name, s, t))
+            found.append(Detection(name, max(passed), t))
         return found
+
+    def _path(self, name: str, key: str, raw: float, thresholds: Mapping[str, float]) -> float | None:
+        """One path's frame score → its smoothed score if it passes (threshold, patience)."""
+        self.max_scores[key] = max(self.max_scores.get(key, 0.0), raw)
+        recent = self._recent.setdefault(key, deque(maxlen=self.smoothings.get(name, 1)))
+        recent.append(raw)
+        s = sum(recent) / len(recent)  # the mean of the last ``smoothing`` frames
+        self.max_smoothed[key] = max(self.max_smoothed.get(key, 0.0), s)
+        over = s >= thresholds.get(name, self.threshold)
+        self._run[key] = self._run.get(key, 0) + 1 if over else 0
+        return s if self._run[key] >= self.patiences.get(name, self.patience) else None

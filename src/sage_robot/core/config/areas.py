@@ -48,6 +48,9 @@ class NavSettings(Section):
     replan_hz: float = Field(1.0, gt=0, description="Global replanning rate while driving (Hz).")
     local_costmap_m: float = Field(6.0, gt=0, description="Side of the rolling local costmap (m).")
     laser_beams: int = Field(60, gt=0, description="Beams per scan the particle filter uses.")
+    refine_pose: bool = Field(
+        True, description="Place the whole scan on the map by least squares once the particle cloud "
+                          "has converged, and report that pose (cm-level instead of the filter's ~5 cm).")
     health_tolerance_m: float = Field(
         0.15, gt=0, description="A beam fits the map when it ends this close to a wall (m)."
     )
@@ -92,6 +95,16 @@ class VoiceSettings(Section):
     wake_model_smoothing: dict[str, int] = Field(
         default_factory=lambda: {"hey_jarvis": 5, "alexa": 2},
         description="Per-model smoothing overriding wake_smoothing_frames (model name → frames).",
+    )
+    wake_denoise: bool = Field(
+        True,
+        description="A second wake path through a stationary-noise suppressor "
+        "(either path detects; about twice the wake CPU).",
+    )
+    wake_denoise_thresholds: dict[str, float] = Field(
+        default_factory=lambda: {"hey_jarvis": 0.25},
+        description="Thresholds of the denoised path (model name → 0..1); models not named "
+        "have no second path.",
     )
     vad_threshold: float = Field(0.6, ge=0, le=1, description="Speech probability threshold.")
     vad_silence_s: float = Field(0.7, gt=0, description="Silence that ends an utterance (s).")
