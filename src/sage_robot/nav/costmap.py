@@ -219,6 +219,14 @@ class Costmap:
         self.obstacles[:] = False
         self.obstacles[r0:r1, c0:c1] = keep
 
+    def clear_obstacles_near(self, x: float, y: float, radius_m: float) -> None:
+        """Forget the scan marks within the square of half-side ``radius_m`` around (x, y)."""
+        g = self.geom
+        lo, hi = g.to_cell(x - radius_m, y - radius_m), g.to_cell(x + radius_m, y + radius_m)
+        r0, c0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
+        self.obstacles[r0:max(int(hi[0]) + 1, 0), c0:max(int(hi[1]) + 1, 0)] = False
+        self.refresh()
+
     def clear_obstacles(self) -> None:
         """Nav2's clear-costmap recovery: forget everything the scans marked."""
         self.obstacles[:] = False

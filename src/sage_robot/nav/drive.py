@@ -61,6 +61,7 @@ RELOCALIZED_SPREAD_M = 0.5  # and the particle cloud must have shrunk to this (m
 ETA_MIN_SPEED_MPS = 0.3
 SETTLE_NEAR_GOAL_M = 3.5  # with the goal itself taken by people, this close counts as arrived (m);
 #   a standing person stops the robot 2.4-3.1 m away (legs padding, inscribed radius, forward check)
+GOAL_TAKEN_CLEAR_M = 1.0  # people on the goal: plan as if this much around it were free (m)
 KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
 STEP_AWAY_M = 0.5  # longest step away from an obstacle the robot stands too close to (m)
 STEP_AWAY_CLEAR_M = 0.05  # step away until this much beyond the inscribed radius (m)
@@ -126,16 +127,27 @@ class GoalRun:
         goal = self.target.pose[:2]
 
         def work() -> Plan:
+            cm = node.global_cm
             if with_obstacles:
                 node.refresh_global()
-                return plan(node.global_cm, start[:2], goal)
-            saved = node.global_cm.obstacles.copy()
-            node.global_cm.clear_obstacles()
+                try:
+                    return plan(cm, start[:2], goal)
+                except NoPath:
+                    if not cm.blocked(np.array([goal]))[0]:
+                        raise
+            # without the scan's marks (or, when people stand on the goal, without those near
+            # it: the robot heads there, the forward check stops it short, and the ladder
+            # settles once waiting has failed)
+            saved = cm.obstacles.copy()
+            if with_obstacles:
+                cm.clear_obstacles_near(goal[0], goal[1], GOAL_TAKEN_CLEAR_M)
+            else:
+                cm.clear_obstacles()
             try:
-                return plan(node.global_cm, start[:2], goal)
+                return plan(cm, start[:2], goal)
             finally:
-                node.global_cm.obstacles[:] = saved
-                node.global_cm.refresh()
+                cm.obstacles[:] = saved
+                cm.refresh()
 
         try:
             result = await asyncio.to_thread(work)

@@ -20,30 +20,37 @@ from typing import Any
 import numpy as np
 
 from sage_robot.core import topics
-from sage_robot.core.geometry import compose, inverse
+from sage_robot.core.geometry import compose, inverse, relative
 from sage_robot.core.msgs import Imu, LaserScan, Odometry, Pose2D, PoseStamped, PoseWithCovariance
 from sage_robot.core.msgs.nav import LocalizationHealth
 from sage_robot.core.node import Node
 from sage_robot.nav.amcl import ParticleFilter, scan_fit
 from sage_robot.nav.ekf import YawRateEkf
 from sage_robot.nav.mapdata import load_for
+from sage_robot.nav.scanmatch import SignedDistanceField, refine
 
 Pose = tuple[float, float, float]
+Fix = tuple[Pose, Pose]  # a refined map pose and the odometry pose it was taken at
 
 HEALTH_WINDOW = 5  # scans averaged into the health score
 FORCED_UPDATES_AFTER_RESET = 8  # filter updates without motion after a global relocalization
 FORCED_UPDATE_PERIOD_S = 0.3  # how often those forced updates may run (s)
 MIN_INITIAL_SIGMA_XY_M = 0.05
 MIN_INITIAL_SIGMA_YAW_RAD = 0.05
+REFINE_SPREAD_M = 0.3  # refine the pose by scan matching only once the cloud is this tight (m)
 
 
 class LocalizationNode(Node):
     name = "localization"
+    _sdf: SignedDistanceField | None = None  # the scan matcher's field, built after start-up
 
     async def _prepare_region(self) -> None:
-        """Where global localization may look (~0.3 s of CPU), worked out after start-up so the
-        node is running (and tracking from its initial place) meanwhile."""
+        """Where global localization may look (~0.3 s of CPU) and the scan matcher's distance
+        field (~1.5 s on the shipped map), worked out after start-up so the node is running
+        (and tracking from its initial place) meanwhile."""
         await asyncio.to_thread(lambda: self.pf.region)
+        if self.settings.nav.refine_pose:
+            self._sdf = await asyncio.to_thread(SignedDistanceField, self.data.grid)
 
     async def setup(self) -> None:
         nav, lidar = self.settings.nav, self.settings.robot.lidar
@@ -59,6 +66,9 @@ class LocalizationNode(Node):
         self._forced = 0
         self._last_forced = -math.inf
         self._map_pose: Pose | None = None
+        self._sdf = None
+        self._fix: Fix | None = None
+        self.refined = 0  # filter updates whose pose the scan matcher refined
         self.health: LocalizationHealth | None = None
         self.update_times: deque[float] = deque(maxlen=200)
         self._global_pending = nav.initial_place not in self.data.places
@@ -99,6 +109,7 @@ class LocalizationNode(Node):
         async with self._lock:
             self.pf.set_pose(msg.pose.x, msg.pose.y, msg.pose.theta, sxy, syaw)
             self.pf._odom_ref = None
+            self._fix = None
             self._cloud = await asyncio.to_thread(self._cloud_stats)
             self._scores.clear()
             self._forced = FORCED_UPDATES_AFTER_RESET
@@ -125,6 +136,7 @@ class LocalizationNode(Node):
                 await asyncio.to_thread(self.pf.global_localization, (angles, ranges, scan.range_max))
                 self._cloud = await asyncio.to_thread(self._cloud_stats)
                 self._forced, self._scores = FORCED_UPDATES_AFTER_RESET, deque(maxlen=HEALTH_WINDOW)
+                self._fix = None
                 self.log.info("global localization started", particles=self.pf.count)
             now = self.clock.now()
             force = self._forced > 0 and now - self._last_forced >= FORCED_UPDATE_PERIOD_S
@@ -137,8 +149,9 @@ class LocalizationNode(Node):
                     self._last_forced = now
                 if updated:
                     self._cloud = await asyncio.to_thread(self._cloud_stats)
+                    self._fix = await asyncio.to_thread(self._refine, odom, angles, ranges, scan.range_max)
                     self._publish_pose(scan.stamp)
-            pose = self.pf.pose_at(odom)
+            pose = compose(self._fix[0], relative(self._fix[1], odom)) if self._fix else self.pf.pose_at(odom)
         self._map_pose = pose
         correction = compose(pose, inverse(odom))
         self.bus.publish(topics.MAP_ODOM, PoseStamped(scan.stamp, "map", Pose2D(*correction)))
@@ -149,10 +162,25 @@ class LocalizationNode(Node):
         so this runs once per update, in the worker thread, not on every scan."""
         return self.pf.spread_m(), max(1, len(self.pf.hypotheses()))
 
+    def _refine(self, odom: Pose, angles: np.ndarray, ranges: np.ndarray, range_max: float) -> Fix | None:
+        """The filter's estimate placed on the map by scan matching, when the cloud is one tight
+        hypothesis (a split cloud is not refined: the matcher would only polish one guess)."""
+        spread, hypotheses = self._cloud
+        if self._sdf is None or spread > REFINE_SPREAD_M or hypotheses > 1:
+            return None
+        e, lidar = self.pf.estimate(), self.settings.robot.lidar
+        fix = refine(self._sdf, (e.x, e.y, e.theta), (lidar.x_m, lidar.y_m, lidar.yaw_rad), angles, ranges,
+                     range_max)
+        if fix is None:
+            return None
+        self.refined += 1
+        return (fix.x, fix.y, fix.theta), odom
+
     def _publish_pose(self, stamp: float) -> None:
         e = self.pf.estimate()
-        self.bus.publish(topics.AMCL_POSE,
-                         PoseWithCovariance(stamp, "map", Pose2D(e.x, e.y, e.theta), e.covariance))
+        x, y, theta = self._fix[0] if self._fix else (e.x, e.y, e.theta)
+        msg = PoseWithCovariance(stamp, "map", Pose2D(x, y, theta), e.covariance)
+        self.bus.publish(topics.AMCL_POSE, msg)
 
     def _publish_health(self, scan: LaserScan, pose: Pose, angles: np.ndarray, ranges: np.ndarray) -> None:
         nav, lidar = self.settings.nav, self.settings.robot.lidar
@@ -174,6 +202,7 @@ class LocalizationNode(Node):
         return {
             "particles": self.pf.count,
             "updates": self.pf.updates,
+            "refined": self.refined,
             "update_ms_median": round(1000 * times[len(times) // 2], 2) if times else None,
             "health": round(self.health.score, 3) if self.health else None,
         }
