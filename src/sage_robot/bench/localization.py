@@ -101,6 +101,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.core.geometry import compose, relative, wrap_angle
     from sage_robot.nav.amcl import ParticleFilter, scan_fit
     from sage_robot.nav.mapdata import load_for
+    from sage_robot.nav.scanmatch import SignedDistanceField, refine
     from sage_robot.sim.raycast import GridRaycaster
 
     settings = Settings.model_validate({"nav": {"map": args.map}})
@@ -119,13 +120,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         r = (by or caster).cast(lx, ly, angles + lt, 12.0)
         return (r * (1.0 + RANGE_NOISE * rng.standard_normal(len(r)))).astype(np.float64)
 
+    sdf = SignedDistanceField(data.grid)
     out: dict[str, Any] = {"bench": "localization", "map": str(data.path), "beams": args.beams}
     poses = _poses(_route(cm, rng, cells))
     for n in (500, 2000):
         pf = ParticleFilter(data.grid, np.random.default_rng(args.seed), n, n, mount, args.beams)
         pf.set_pose(*poses[0])
         pf.update(poses[0], angles, scan(poses[0]), 12.0)  # the odometry reference: no update yet
-        times, errs = [], []
+        times, errs, fixed, refine_ms = [], [], [], []
         odom = poses[0]
         for k in range(UPDATES):
             truth = poses[min(k + 1, len(poses) - 1)]
@@ -136,10 +138,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             times.append(time.perf_counter() - t)
             e = pf.estimate()
             errs.append(math.hypot(e.x - truth[0], e.y - truth[1]))
+            t = time.perf_counter()
+            fix = refine(sdf, (e.x, e.y, e.theta), mount, angles, r, 12.0)  # as the node does
+            refine_ms.append((time.perf_counter() - t) * 1000)
+            fixed.append(errs[-1] if fix is None else math.hypot(fix.x - truth[0], fix.y - truth[1]))
         a = np.array(times) * 1000
         out[f"update_{n}"] = {"median_ms": round(float(np.median(a)), 2),
                               "p95_ms": round(float(np.percentile(a, 95)), 2),
-                              "tracking_error_median_m": round(float(np.median(errs)), 3)}
+                              "tracking_error_median_m": round(float(np.median(errs)), 3),
+                              "tracking_error_rms_m": round(float(np.sqrt(np.mean(np.square(errs)))), 3),
+                              "refined_error_median_m": round(float(np.median(fixed)), 3),
+                              "refined_error_rms_m": round(float(np.sqrt(np.mean(np.square(fixed)))), 3),
+                              "refine_ms_median": round(float(np.median(refine_ms)), 2)}
     seeds = [(p.pose.x, p.pose.y) for p in data.places]
     # progress per filter update, reported as metres driven or turns spun
     unit, step = ("turns", SPIN_STEP_RAD / (2 * math.pi)) if args.motion == "spin" else ("m", STEP_M)
