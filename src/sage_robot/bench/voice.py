@@ -5,7 +5,8 @@
 - End of speech → first audio: whole turns through the pipeline on the wall clock, with a
   brain that echoes the question (the simulated room's mic and speaker).
 - Wake false rejects over synthesized "hey jarvis" (Piper at several speeds, espeak-ng
-  voices, clean and in white noise; apart, in the babble of other talkers) and "alexa",
+  voices, clean and in white noise; apart, in white noise that starts 2 s before the
+  phrase, and in the babble of other talkers) and "alexa",
   and false accepts over minutes of other speech and noise.
 - CPU per 80 ms frame (wake models + VAD).
 """
@@ -32,6 +33,7 @@ PIPER_SPEEDS = (0.8, 0.9, 1.0, 1.15, 1.3)  # length scales: < 1 faster
 ESPEAK_VOICES = ("en-us", "en-us+f3", "en-gb", "en-us+m3")
 ESPEAK_RATES = (140, 175)  # words per minute
 SNRS_DB = (None, 15.0, 5.0)
+WAKE_LEAD_S = 2.0  # noisy clips again, the noise starting this long before the phrase
 WAKE_NOISE_SEED = 11  # clean, then white noise at these signal-to-noise ratios
 BABBLE_SNRS_DB = (10.0, 5.0)  # four other talkers (a busy hallway) at these ratios
 BABBLE_TALKERS = 4
@@ -143,13 +145,23 @@ def _wake_sources(speech: Any, phrases: tuple[str, ...], quick: bool) -> list[tu
     return out
 
 
-def _white_clips(sources: list[tuple[str, np.ndarray]]) -> list[tuple[str, np.ndarray]]:
-    """Each source clean and in white noise at ``SNRS_DB`` (noise seeded per clip)."""
+def _white_clips(sources: list[tuple[str, np.ndarray]], lead_s: float = 0.0
+                 ) -> list[tuple[str, np.ndarray]]:  # fmt: skip
+    """Each source clean and in white noise at ``SNRS_DB`` (noise seeded per clip). With
+    ``lead_s`` the clip has that much more before and after the phrase, and the noise
+    (at the phrase's SNR) fills it too: the detector hears the noise before the phrase."""
     clips: list[tuple[str, np.ndarray]] = []
+    lead = np.zeros(round(lead_s * RATE), dtype=np.int16)
     for name, pcm in sources:
         for snr in SNRS_DB:
             rng = np.random.default_rng([WAKE_NOISE_SEED, len(clips)])
-            clips.append((f"{name} {snr}dB", _noisy(pcm, snr, rng)))
+            if lead_s > 0 and snr is not None:
+                sig = float(np.sqrt(np.mean(pcm.astype(np.float64) ** 2)))
+                x = np.concatenate([lead, pcm, lead]).astype(np.float64)
+                x += rng.normal(0.0, sig / 10 ** (snr / 20), len(x))
+                clips.append((f"{name} {snr}dB lead", np.clip(x, -32768, 32767).astype(np.int16)))
+            elif lead_s <= 0:
+                clips.append((f"{name} {snr}dB", _noisy(pcm, snr, rng)))
     return clips
 
 
@@ -400,6 +412,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out["wake_denoise_thresholds"] = dict(settings.wake_denoise_thresholds)
     jarvis = _wake_sources(models.speech, WAKE_PHRASES, args.quick)
     out.update(_false_rejects(engine, _white_clips(jarvis), both))
+    out.update(_false_rejects(engine, _white_clips(jarvis, WAKE_LEAD_S), both, prefix="wake_lead"))
     talkers = _talkers(models.speech)
     out.update(_false_rejects(engine, _babble_clips(jarvis, talkers), both, prefix="wake_babble"))
     alexa = _wake_sources(models.speech, ALEXA_PHRASES, args.quick)
