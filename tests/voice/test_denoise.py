@@ -116,3 +116,8 @@ def test_denoised_path_hears_a_hey_jarvis_the_first_path_misses(models, voice_se
     det = WakeDetector.from_settings(models.wake, voice_settings)
     assert [d.model for d in det.feed(audio)] == ["hey_jarvis"]
     assert det.max_smoothed["hey_jarvis"] < 0.25 <= det.max_smoothed["hey_jarvis" + DENOISED_SUFFIX]
+
+
+def test_denoised_path_needs_its_own_engine(models):
+    with pytest.raises(ValueError, match="its own engine"):
+        WakeDetector(models.wake, denoised=models.wake)

@@ -194,8 +194,8 @@ class WakeDetector:
         denoised_thresholds: Mapping[str, float] | None = None,
     ) -> None:
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
-        if denoised is not None and set(denoised.names) != set(engine.names):
-            raise ValueError(f"the denoised path needs the same models: {denoised.names}")
+        if denoised is not None and (denoised is engine or set(denoised.names) != set(engine.names)):
+            raise ValueError("the denoised path needs its own engine with the same models")
         self.denoised = denoised
         self.suppressor = NoiseSuppressor() if denoised is not None else None
         if denoised is not None:
@@ -216,7 +216,7 @@ class WakeDetector:
         for name, th in [*self.thresholds.items(), *self.denoised_thresholds.items()]:
             if not 0 <= th <= 1:
                 raise ValueError(f"wake threshold of {name} must be in 0..1, got {th}")
-        self._run: dict[str, int] = {}  # frames in a row over threshold, per model
+        self._run: dict[str, int] = {}  # frames in a row over threshold, per path key
         self.keep_scores = keep_scores
         self.scores: list[dict[str, float]] = []  # every frame's scores, with keep_scores
         self._framer = Framer(FRAME_SAMPLES)
