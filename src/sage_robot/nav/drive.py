@@ -69,6 +69,7 @@ STEP_AWAY_SPEED_MPS = 0.15
 STEP_AWAY_TURN_RADPS = 0.6
 STEP_AWAY_ALIGNED_RAD = 0.1  # turned toward the escape heading within this (rad)
 STEP_AWAY_SLACK = 3.0  # time allowed: this many times the time the step should take
+STEP_AWAY_LOOK_M = 0.1  # creeping stops when the floor this far ahead is nearer an obstacle (m)
 
 
 @dataclass(frozen=True)
@@ -344,7 +345,7 @@ class GoalRun:
             x, y, th = self.pose()
             cm = node.local_cm or cm
             here = cm.distance_at(x, y)
-            ahead = cm.distance_at(x + 0.1 * math.cos(th), y + 0.1 * math.sin(th))
+            ahead = cm.distance_at(x + STEP_AWAY_LOOK_M * math.cos(th), y + STEP_AWAY_LOOK_M * math.sin(th))
             if here >= cm.inscribed_m + STEP_AWAY_CLEAR_M or math.hypot(x - x0, y - y0) >= STEP_AWAY_M \
                     or ahead < here - 1e-3:
                 break
