@@ -47,9 +47,9 @@ def test_a_guess_a_few_cm_off_is_pulled_onto_the_truth(floor) -> None:
 
 
 def test_people_in_view_are_left_out(floor) -> None:
-    grid, sdf, caster = floor
+    _, sdf, caster = floor
     r = _scan(caster, TRUTH)
-    # a crowd on one side: beams within 60 degrees of one direction return at 1 m
+    # a crowd on one side: the beams of a 60 degree sector return at 1 m
     crowd = np.abs(wrap_angle(ANGLES - 1.0)) < math.radians(30)
     r[crowd] = 1.0
     fix = refine(sdf, (4.35, 5.16, 0.43), (0.0, 0.0, 0.0), ANGLES, r, RANGE_MAX_M)
