@@ -206,7 +206,7 @@ def test_profile_alexa_wakes_on_alexa_not_on_alex(models, voice_settings, say16k
 def test_profile_detector_no_wake_on_neutral_and_noise(models, voice_settings, say16k):
     """The profile's per-model settings (hey_jarvis 0.25 on a 5-frame mean) stay silent on
     other speech and noise, and still hear an espeak-ng "hey jarvis" in noise."""
-    from sage_robot.bench.voice import _noisy
+    from sage_robot.bench.voice_wake import noisy as add_noise
     from sage_robot.voice.tts import EspeakEngine
 
     audio = np.concatenate([x for s in NEUTRAL for x in (say16k(s), silence(0.3))] + [noise(3, 800)])
@@ -218,6 +218,6 @@ def test_profile_detector_no_wake_on_neutral_and_noise(models, voice_settings, s
     pcm = resample(es.synthesize_sentence("Hey Jarvis."), es.sample_rate, SAMPLE_RATE)
     models.wake.reset()
     det = WakeDetector.from_settings(models.wake, voice_settings)
-    noisy = _noisy(pcm, 10.0, np.random.default_rng(1))
+    noisy = add_noise(pcm, 10.0, np.random.default_rng(1))
     found = det.feed(np.concatenate([silence(0.5), noisy, silence(1.0)]))
     assert [d.model for d in found] == ["hey_jarvis"]
