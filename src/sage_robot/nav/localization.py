@@ -7,7 +7,9 @@ the place ``nav.initial_place``; ``/initialpose`` resets it; the ``GLOBAL_LOCALI
 service relocalizes over the free space connected to the places (``amcl_global``; the next
 few scans update the filter even without motion). Health carries ``spread_m`` and the
 number of ``hypotheses`` still alive: after a global relocalization the cloud is only
-converged when one place is left. Filter updates run in a worker thread.
+converged when one place is left. With ``nav.refine_pose``, a converged estimate is
+refined by scan matching (``scanmatch``) after each filter update, and that pose is what
+``/amcl_pose`` and the map→odom correction report. Filter updates run in a worker thread.
 """
 
 from __future__ import annotations
