@@ -55,6 +55,32 @@ def noise(seconds: float, rms: float = 30.0, seed: int = 0) -> np.ndarray:
     return np.clip(rng.normal(0, rms, round(seconds * SAMPLE_RATE)), -32768, 32767).astype(np.int16)
 
 
+def neutral_and_noise(say16k) -> np.ndarray:
+    """Every neutral sentence of test_wake in the robot's voice, then white noise."""
+    from .test_wake import NEUTRAL
+
+    return np.concatenate([x for s in NEUTRAL for x in (say16k(s), silence(0.3))]
+                          + [noise(3, 800), noise(2, 2000, seed=1)])  # fmt: skip
+
+
+def chunked_runs(engine, settings, audio: np.ndarray, key: str) -> list[tuple[list, float]]:
+    """The profile detector over ``audio`` fed in 80 ms, 333- and 4096-sample chunks:
+    per run, its detections (model, time, score) and the best smoothed score of ``key``."""
+    from sage_robot.voice.audio_io import FRAME_SAMPLES
+    from sage_robot.voice.wake import WakeDetector
+
+    results = []
+    for chunk in (FRAME_SAMPLES, 333, 4096):
+        engine.reset()
+        det = WakeDetector.from_settings(engine, settings)
+        found = []
+        for i in range(0, len(audio), chunk):
+            found += det.feed(audio[i : i + chunk])
+        results.append(([(d.model, d.time_s, round(d.score, 6)) for d in found],
+                        round(det.max_smoothed[key], 6)))  # fmt: skip
+    return results
+
+
 @pytest.fixture
 def pocketsphinx_data() -> Path:
     if not (POCKETSPHINX / "goforward.raw").is_file():

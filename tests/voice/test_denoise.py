@@ -9,7 +9,13 @@ from sage_robot.voice.audio_io import FRAME_SAMPLES, SAMPLE_RATE
 from sage_robot.voice.denoise import DELAY_SAMPLES, GAIN_FLOOR, HOP, NoiseSuppressor
 from sage_robot.voice.wake import DENOISED_SUFFIX, WakeDetector
 
-from .conftest import noise, silence
+from .conftest import chunked_runs, neutral_and_noise, noise
+
+
+@pytest.fixture(scope="module")
+def denoising(voice_settings):
+    """The denoised path on (the profile has it off), without the head (tested apart)."""
+    return voice_settings.model_copy(update={"wake_denoise": True, "wake_heads": {}})
 
 
 def _rms(x: np.ndarray) -> float:
@@ -60,42 +66,30 @@ def test_suppressor_rejects_bad_settings():
         NoiseSuppressor(min_subwindows=0)
 
 
-def test_profile_turns_the_denoised_path_on(models, voice_settings):
+def test_profile_turns_the_denoised_path_on(models, denoising):
     models.wake.reset()
-    det = WakeDetector.from_settings(models.wake, voice_settings)
+    det = WakeDetector.from_settings(models.wake, denoising)
     assert det.denoised is not None and det.denoised is not models.wake
     assert det.denoised_thresholds == {"hey_jarvis": 0.25}  # alexa: no second path
     assert set(det.max_scores) == {"hey_jarvis", "alexa", "hey_jarvis" + DENOISED_SUFFIX}
-    off = WakeDetector.from_settings(models.wake, voice_settings.model_copy(update={"wake_denoise": False}))
+    off = WakeDetector.from_settings(models.wake, denoising.model_copy(update={"wake_denoise": False}))
     assert off.denoised is None and set(off.max_scores) == {"hey_jarvis", "alexa"}
 
 
-def test_denoised_path_detections_do_not_depend_on_chunking(models, voice_settings, say16k):
+def test_denoised_path_detections_do_not_depend_on_chunking(models, denoising, say16k):
     audio = np.concatenate([noise(1.0, 300), say16k("Hey Jarvis."), noise(0.8, 300)])
-    results = []
-    for chunk in (FRAME_SAMPLES, 333, 4096):
-        models.wake.reset()
-        det = WakeDetector.from_settings(models.wake, voice_settings)
-        found = []
-        for i in range(0, len(audio), chunk):
-            found += det.feed(audio[i : i + chunk])
-        results.append(([(d.model, d.time_s, round(d.score, 6)) for d in found],
-                        round(det.max_smoothed["hey_jarvis" + DENOISED_SUFFIX], 6)))  # fmt: skip
+    results = chunked_runs(models.wake, denoising, audio, "hey_jarvis" + DENOISED_SUFFIX)
     assert results[0][0] and results[0] == results[1] == results[2]
 
 
-def test_denoised_path_no_wake_on_neutral_and_noise(models, voice_settings, say16k):
-    from .test_wake import NEUTRAL
-
-    audio = np.concatenate([x for s in NEUTRAL for x in (say16k(s), silence(0.3))]
-                           + [noise(3, 800), noise(2, 2000, seed=1)])  # fmt: skip
+def test_denoised_path_no_wake_on_neutral_and_noise(models, denoising, say16k):
     models.wake.reset()
-    det = WakeDetector.from_settings(models.wake, voice_settings)
-    assert det.feed(audio) == []
+    det = WakeDetector.from_settings(models.wake, denoising)
+    assert det.feed(neutral_and_noise(say16k)) == []
     assert det.max_smoothed["hey_jarvis" + DENOISED_SUFFIX] < det.denoised_thresholds["hey_jarvis"]
 
 
-def test_denoised_path_hears_a_hey_jarvis_the_first_path_misses(models, voice_settings):
+def test_denoised_path_hears_a_hey_jarvis_the_first_path_misses(models, denoising):
     """espeak-ng en-gb+m1 at 150 wpm, 5 dB SNR white noise that starts 1 s before the
     phrase: the first path's best 5-frame mean stays under its threshold (0.18 < 0.25),
     the denoised path's reaches ~0.7. (One example; the tuning set's counts are in
@@ -109,11 +103,11 @@ def test_denoised_path_hears_a_hey_jarvis_the_first_path_misses(models, voice_se
     x = np.concatenate([np.zeros(SAMPLE_RATE), pcm.astype(np.float64), np.zeros(SAMPLE_RATE)])
     x += np.random.default_rng(2).normal(0, sig / 10 ** (5 / 20), len(x))
     audio = np.clip(x, -32768, 32767).astype(np.int16)
-    off = voice_settings.model_copy(update={"wake_denoise": False})
+    off = denoising.model_copy(update={"wake_denoise": False})
     models.wake.reset()
     assert WakeDetector.from_settings(models.wake, off).feed(audio) == []
     models.wake.reset()
-    det = WakeDetector.from_settings(models.wake, voice_settings)
+    det = WakeDetector.from_settings(models.wake, denoising)
     assert [d.model for d in det.feed(audio)] == ["hey_jarvis"]
     assert det.max_smoothed["hey_jarvis"] < 0.25 <= det.max_smoothed["hey_jarvis" + DENOISED_SUFFIX]
 

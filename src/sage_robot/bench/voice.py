@@ -247,8 +247,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                              for n in WAKE_MODELS}  # fmt: skip
     out["wake_denoise"] = settings.wake_denoise
     out["wake_denoise_thresholds"] = dict(settings.wake_denoise_thresholds)
+    out["wake_heads"] = dict(settings.wake_heads)
+    out["wake_head_threshold"], out["wake_head_gate"] = settings.wake_head_threshold, settings.wake_head_gate
     jarvis = wake_sources(models.speech, WAKE_PHRASES, args.quick)
     out.update(false_rejects(engine, white_clips(jarvis), both))
+    no_head = both.model_copy(update={"wake_heads": {}})  # A/B: the same clips without the heads
+    out.update(false_rejects(engine, white_clips(jarvis), no_head, prefix="wake_no_head"))
     out.update(false_rejects(engine, white_clips(jarvis, WAKE_LEAD_S), both, prefix="wake_lead"))
     talkers = babble_talkers(models.speech)
     out.update(false_rejects(engine, babble_clips(jarvis, talkers), both, prefix="wake_babble"))

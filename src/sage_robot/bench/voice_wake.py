@@ -188,4 +188,5 @@ def false_accepts(engine: Any, audio: np.ndarray, vs: Any, profile_models: Any) 
             "alexa_false_accepts": sum(d.model == "alexa" for d in found),
             "fa_max_scores": {k: round(v, 3) for k, v in det.max_scores.items()},
             "fa_max_smoothed": {k: round(v, 3) for k, v in det.max_smoothed.items()},
+            "fa_max_head_gated": {k: round(v, 3) for k, v in det.max_head_gated.items()},
             "fa_detections": [(d.model, round(d.time_s, 1)) for d in found[:10]]}  # fmt: skip

@@ -86,6 +86,9 @@ def cmd_wake(args: argparse.Namespace) -> int:
         ],
         "max_scores": {k: round(v, 4) for k, v in detector.max_scores.items()},
     }
+    if detector.heads:  # scores under "<model>/head"; the threshold override is for models only
+        out["heads"] = {m: h.name for m, h in detector.heads.items()}
+        out["head_threshold"], out["head_gate"] = detector.head_threshold_value, detector.head_gate
     if args.json:
         print(json.dumps(out))
     else:

@@ -40,6 +40,7 @@ from sage_robot.voice.stt import SpeechToText
 from sage_robot.voice.tts import Speech, make_engine
 from sage_robot.voice.vad import SileroVad
 from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
+from sage_robot.voice.wake_head import load_head
 
 T = TypeVar("T")
 SIM_OUT_DIR_KEY = "voice_sim_out_dir"  # ctx.resources: where the sim speaker writes WAV files
@@ -80,11 +81,15 @@ def build_pipeline(
     """Wire models, microphone and speaker into a pipeline (also used by tests and bench)."""
     models.wake.reset()
     models.wake_self.reset()
+    # What the robot says, scored by the same models and heads as the mic (patience 1: eager).
+    heads = {m: load_head(h) for m, h in s.wake_heads.items()}
     mouth = Mouth(bus, clock, models.speech, speaker,
                   reference=WakeDetector(models.wake_self, s.wake_threshold, s.wake_refractory_s,
                                          patience=1, model_thresholds=s.wake_model_thresholds,
                                          smoothing=s.wake_smoothing_frames,
-                                         model_smoothing=s.wake_model_smoothing))
+                                         model_smoothing=s.wake_model_smoothing, heads=heads,
+                                         head_threshold=s.wake_head_threshold,
+                                         head_gate=s.wake_head_gate))
     wake = WakeDetector.from_settings(models.wake, s)
     partial = models.stt_partial if s.asr_partial else None
     return VoicePipeline(bus, clock, s, mic, mouth, wake, models.vad, models.stt, partial_stt=partial)

@@ -9,9 +9,13 @@ Scores do not depend on how the audio is chunked: :class:`WakeDetector` re-cuts 
 stream into exact 80 ms frames before the engine sees it, and the engine's feature
 buffers start from a fixed (seeded) state.
 
-With ``denoised`` the detector has a second path: the same frames through a streaming
-stationary-noise suppressor (:mod:`sage_robot.voice.denoise`) into a twin engine, with
-its own thresholds; a model is detected when either path passes.
+More paths can hear the same wake word; a model is detected when any path passes:
+- ``heads``: a small classifier per model on the engine's speech embeddings
+  (:mod:`sage_robot.voice.wake_head`), trained for heavy noise. It counts only while the
+  model's own smoothed score is at least ``head_gate``: the head alone never wakes the
+  robot on audio the model finds nothing like its wake word in.
+- ``denoised``: the same frames through a streaming stationary-noise suppressor
+  (:mod:`sage_robot.voice.denoise`) into a twin engine, with its own thresholds.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import numpy as np
 from sage_robot.core.errors import ConfigError
 from sage_robot.voice.audio_io import FRAME_S, FRAME_SAMPLES, Framer, to_int16
 from sage_robot.voice.denoise import NoiseSuppressor
+from sage_robot.voice.wake_head import HEAD_FRAMES, WakeHead, load_head
 
 WARMUP_SAMPLES = 16000 * 4  # 4 s: openWakeWord's feature history at start-up
 WARMUP_SEED = 1234  # seeds the start-up history so every run scores the same
@@ -36,7 +41,10 @@ WARMUP_AMPLITUDE = 1000  # int16 peak of that start-up noise (openWakeWord's val
 DEFAULT_REFRACTORY_S = 2.0
 DEFAULT_PATIENCE = 2  # frames in a row over threshold: a real wake word gives 5-14, a spike 1
 DEFAULT_SMOOTHING = 1  # frames averaged before the threshold (1: the frame's own score)
-DENOISED_SUFFIX = "/denoised"  # key suffix of the second path's scores in max_scores etc.
+DENOISED_SUFFIX = "/denoised"  # key suffix of the denoised path's scores in max_scores etc.
+HEAD_SUFFIX = "/head"  # key suffix of the head path's scores
+DEFAULT_HEAD_THRESHOLD = 0.9
+DEFAULT_HEAD_GATE = 0.02  # the model's own smoothed score a head needs beside it
 
 
 class WakeEngine(Protocol):
@@ -127,6 +135,11 @@ class OpenWakeWordEngine:
         self._twin: OpenWakeWordEngine | None = None
         self.reset()
 
+    def features(self) -> np.ndarray:
+        """The window of speech embeddings the models scored last: (16, 96)."""
+        pre: Any = self._model.preprocessor
+        return np.asarray(pre.get_features(HEAD_FRAMES)[0], dtype=np.float64)
+
     def twin(self) -> OpenWakeWordEngine:
         """A second engine with the same models and its own audio history (made once)."""
         if self._twin is None:
@@ -177,6 +190,11 @@ class WakeDetector:
     patient the same way, against ``denoised_thresholds`` (only the models named there;
     None: every model at its first-path threshold). Its scores appear under
     ``name + DENOISED_SUFFIX``.
+
+    ``heads`` (model name → :class:`WakeHead`) adds the head path: each head scores the
+    engine's embedding window (the engine needs ``features()``), smoothed like its model,
+    against ``head_threshold``, and passes only while the model's own smoothed score is at
+    least ``head_gate``. Its scores appear under ``name + HEAD_SUFFIX``.
     """
 
     def __init__(
@@ -192,6 +210,9 @@ class WakeDetector:
         model_smoothing: Mapping[str, int] | None = None,
         denoised: WakeEngine | None = None,
         denoised_thresholds: Mapping[str, float] | None = None,
+        heads: Mapping[str, WakeHead] | None = None,
+        head_threshold: float = DEFAULT_HEAD_THRESHOLD,
+        head_gate: float = DEFAULT_HEAD_GATE,
     ) -> None:
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
         if denoised is not None and (denoised is engine or set(denoised.names) != set(engine.names)):
@@ -213,7 +234,13 @@ class WakeDetector:
         self.denoised_thresholds = {} if denoised is None else dict(self.thresholds) \
             if denoised_thresholds is None \
             else {n: th for n, th in denoised_thresholds.items() if n in engine.names}  # fmt: skip
-        for name, th in [*self.thresholds.items(), *self.denoised_thresholds.items()]:
+        self.heads = {n: h for n, h in (heads or {}).items() if n in engine.names}
+        if self.heads and not callable(getattr(engine, "features", None)):
+            raise ValueError("wake heads need an engine that exposes its embeddings (features())")
+        self.head_thresholds = dict.fromkeys(self.heads, head_threshold)
+        self.head_threshold_value, self.head_gate = head_threshold, head_gate
+        for name, th in [*self.thresholds.items(), *self.denoised_thresholds.items(),
+                         *self.head_thresholds.items(), ("head gate", head_gate)]:  # fmt: skip
             if not 0 <= th <= 1:
                 raise ValueError(f"wake threshold of {name} must be in 0..1, got {th}")
         self._run: dict[str, int] = {}  # frames in a row over threshold, per path key
@@ -222,27 +249,34 @@ class WakeDetector:
         self._framer = Framer(FRAME_SAMPLES)
         self.frames = 0
         self._last: dict[str, float] = {}
+        self._smoothed: dict[str, float] = {}  # this frame's smoothed score per path key
         self.max_scores: dict[str, float] = dict.fromkeys(self._keys(), 0.0)  # raw frame scores
         self.max_smoothed: dict[str, float] = dict.fromkeys(self._keys(), 0.0)
+        self.max_head_gated = {n + HEAD_SUFFIX: 0.0 for n in self.heads}  # smoothed, gate open
         self.last_scores: dict[str, float] = dict.fromkeys(engine.names, 0.0)
 
     def _keys(self) -> list[str]:
         keys = list(self.engine.names)
-        return keys + [n + DENOISED_SUFFIX for n in self.denoised_thresholds]
+        return keys + [n + DENOISED_SUFFIX for n in self.denoised_thresholds] \
+            + [n + HEAD_SUFFIX for n in self.heads]  # fmt: skip
 
     @classmethod
     def from_settings(cls, engine: WakeEngine, s: Any, threshold: float | None = None) -> WakeDetector:
         """The profile's detector (``voice`` settings); ``threshold`` overrides every model's.
 
-        With ``s.wake_denoise`` the second path runs on ``engine.twin()`` (an engine
-        without ``twin`` gets none)."""
+        With ``s.wake_denoise`` the denoised path runs on ``engine.twin()`` (an engine
+        without ``twin`` gets none); ``s.wake_heads`` names the heads (an engine without
+        ``features`` gets none; their threshold is ``s.wake_head_threshold`` always)."""
         twin = getattr(engine, "twin", None) if s.wake_denoise else None
+        use_heads = callable(getattr(engine, "features", None))
+        heads = {m: load_head(h) for m, h in s.wake_heads.items()} if use_heads else None
         return cls(engine, s.wake_threshold if threshold is None else threshold,
                    s.wake_refractory_s, patience=s.wake_patience_frames,
                    model_thresholds=s.wake_model_thresholds if threshold is None else None,
                    model_patience=s.wake_model_patience, smoothing=s.wake_smoothing_frames,
                    model_smoothing=s.wake_model_smoothing, denoised=twin() if twin else None,
-                   denoised_thresholds=s.wake_denoise_thresholds if threshold is None else None)  # fmt: skip
+                   denoised_thresholds=s.wake_denoise_thresholds if threshold is None else None,
+                   heads=heads, head_threshold=s.wake_head_threshold, head_gate=s.wake_head_gate)  # fmt: skip
 
     @property
     def time_s(self) -> float:
@@ -258,8 +292,10 @@ class WakeDetector:
         self._last.clear()
         self._run.clear()
         self._recent.clear()
+        self._smoothed.clear()
         self.max_scores = dict.fromkeys(self._keys(), 0.0)
         self.max_smoothed = dict.fromkeys(self._keys(), 0.0)
+        self.max_head_gated = {n + HEAD_SUFFIX: 0.0 for n in self.heads}
 
     def feed(self, chunk: np.ndarray) -> list[Detection]:
         """Push audio; returns the detections completed by it."""
@@ -274,6 +310,10 @@ class WakeDetector:
         if self.denoised is not None and self.suppressor is not None:
             clean = self.suppressor.process(frame)  # a whole frame in, a whole frame out
             paths.append((self.denoised.score(clean), DENOISED_SUFFIX, self.denoised_thresholds))
+        if self.heads:
+            window = self.engine.features()  # type: ignore[attr-defined]  # checked in __init__
+            heads = {n: h.score(window) for n, h in self.heads.items()}
+            paths.append((heads, HEAD_SUFFIX, self.head_thresholds))
         self.frames += 1
         self.last_scores = scores
         if self.keep_scores:
@@ -282,7 +322,8 @@ class WakeDetector:
         t = self.time_s
         for name in scores:
             passed = [s for sc, suffix, ths in paths if name in ths
-                      and (s := self._path(name, name + suffix, sc[name], ths)) is not None]  # fmt: skip
+                      and (s := self._path(name, name + suffix, sc[name], ths)) is not None
+                      and (suffix != HEAD_SUFFIX or self._smoothed[name] >= self.head_gate)]  # fmt: skip
             if not passed:
                 continue
             last = self._last.get(name)
@@ -290,6 +331,10 @@ class WakeDetector:
                 continue
             self._last[name] = t
             found.append(Detection(name, max(passed), t))
+        for name in self.heads:  # what the gate let through: the head's margin to its threshold
+            if self._smoothed[name] >= self.head_gate:
+                key = name + HEAD_SUFFIX
+                self.max_head_gated[key] = max(self.max_head_gated[key], self._smoothed[key])
         return found
 
     def _path(self, name: str, key: str, raw: float, thresholds: Mapping[str, float]) -> float | None:
@@ -298,6 +343,7 @@ class WakeDetector:
         recent = self._recent.setdefault(key, deque(maxlen=self.smoothings.get(name, 1)))
         recent.append(raw)
         s = sum(recent) / len(recent)  # the mean of the last ``smoothing`` frames
+        self._smoothed[key] = s
         self.max_smoothed[key] = max(self.max_smoothed.get(key, 0.0), s)
         over = s >= thresholds.get(name, self.threshold)
         self._run[key] = self._run.get(key, 0) + 1 if over else 0

@@ -96,10 +96,22 @@ class VoiceSettings(Section):
         default_factory=lambda: {"hey_jarvis": 5, "alexa": 2},
         description="Per-model smoothing overriding wake_smoothing_frames (model name → frames).",
     )
+    wake_heads: dict[str, str] = Field(
+        default_factory=lambda: {"hey_jarvis": "hey_jarvis_noise"},
+        description="Wake heads (model name → bundled head name or .npz path): small "
+        "classifiers on the model's speech embeddings, trained for heavy noise.",
+    )
+    wake_head_threshold: float = Field(
+        0.9, ge=0, le=1, description="Threshold of a head's smoothed score."
+    )
+    wake_head_gate: float = Field(
+        0.02, ge=0, le=1,
+        description="A head counts only while its model's own smoothed score is at least this.",
+    )
     wake_denoise: bool = Field(
-        True,
-        description="A second wake path through a stationary-noise suppressor "
-        "(either path detects; about twice the wake CPU).",
+        False,
+        description="A further wake path through a stationary-noise suppressor "
+        "(about twice the wake CPU; adds nothing beside the heads on the tuning set).",
     )
     wake_denoise_thresholds: dict[str, float] = Field(
         default_factory=lambda: {"hey_jarvis": 0.25},
