@@ -34,6 +34,7 @@ from sage_robot.bench.voice_wake import (
     false_accepts,
     false_rejects,
     non_wake_audio,
+    real_speech_in_noise,
     wake_sources,
     white_clips,
 )
@@ -261,4 +262,5 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     minutes = 0.5 if args.quick else args.fa_minutes
     out.update(false_accepts(engine, non_wake_audio(models.speech, minutes), both,
                               settings.wake_models))  # fmt: skip
+    out.update(real_speech_in_noise(engine, settings))
     return out

@@ -190,3 +190,31 @@ def false_accepts(engine: Any, audio: np.ndarray, vs: Any, profile_models: Any) 
             "fa_max_smoothed": {k: round(v, 3) for k, v in det.max_smoothed.items()},
             "fa_max_head_gated": {k: round(v, 3) for k, v in det.max_head_gated.items()},
             "fa_detections": [(d.model, round(d.time_s, 1)) for d in found[:10]]}  # fmt: skip
+
+
+REAL_NOISE_SNRS_DB = (10.0, 5.0)  # real recordings again, in white noise at these ratios
+
+
+def real_speech_in_noise(engine: Any, vs: Any) -> dict[str, Any]:
+    """Detections by the profile's models on every real recording of ``POCKETSPHINX`` in
+    white noise (the heads learned from synthetic voices only: this is where they could go
+    wrong), and the heads' best smoothed scores, with and without the gate open."""
+    from sage_robot.voice.audio_io import load_audio
+    from sage_robot.voice.wake import WakeDetector
+
+    files = sorted(POCKETSPHINX.glob("**/*.wav")) + sorted(POCKETSPHINX.glob("*.raw"))
+    gap = np.zeros(RATE // 2, dtype=np.int16)
+    speech = np.concatenate([x for f in files for x in (load_audio(f), gap)]).astype(np.float64)
+    rng = np.random.default_rng(13)
+    found, head_max, gated_max = 0, 0.0, 0.0
+    for snr in REAL_NOISE_SNRS_DB:
+        x = speech + rng.normal(0.0, float(np.sqrt(np.mean(speech**2))) / 10 ** (snr / 20), len(speech))
+        engine.reset()
+        det = WakeDetector.from_settings(engine, vs)
+        found += sum(d.model in vs.wake_models for d in det.feed(np.clip(x, -32768, 32767).astype(np.int16)))
+        heads = list(det.max_head_gated)
+        head_max = max([head_max] + [det.max_smoothed[k] for k in heads])
+        gated_max = max([gated_max] + [det.max_head_gated[k] for k in heads])
+    return {"real_noisy_audio_s": round(len(speech) * len(REAL_NOISE_SNRS_DB) / RATE, 1),
+            "real_noisy_false_accepts": found, "real_noisy_head_max": round(head_max, 3),
+            "real_noisy_head_max_gated": round(gated_max, 3)}  # fmt: skip
