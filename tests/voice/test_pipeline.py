@@ -25,7 +25,7 @@ from sage_robot.core.topics import (
     TURN_LATENCY,
     UI_STATE,
 )
-from sage_robot.sim.audio import ECHO_GAIN, SimMicrophone, SimSpeaker
+from sage_robot.sim.audio import ECHO_GAIN, NOISE_FLOOR_RMS, SimMicrophone, SimSpeaker
 from sage_robot.voice.node import build_pipeline
 from sage_robot.voice.pipeline import NO_BRAIN, State
 
@@ -37,10 +37,11 @@ WAIT_S = 90.0  # bound on every wait (real seconds)
 class Room:
     """A bus, a SimClock driven in the background, the sim mic/speaker and a pipeline."""
 
-    def __init__(self, settings, models, echo_gain: float = ECHO_GAIN) -> None:
+    def __init__(self, settings, models, echo_gain: float = ECHO_GAIN,
+                 noise_rms: float = NOISE_FLOOR_RMS) -> None:  # fmt: skip
         self.clock = SimClock()
         self.bus = Bus(self.clock)
-        self.mic = SimMicrophone(self.clock)
+        self.mic = SimMicrophone(self.clock, noise_rms=noise_rms)
         self.speaker = SimSpeaker(self.clock, self.mic, echo_gain=echo_gain)
         self.pipeline = build_pipeline(self.bus, self.clock, settings, models, self.mic, self.speaker)
         self.ui: list[UiState] = []
@@ -138,6 +139,28 @@ async def test_full_turn_with_fake_brain(voice_settings, models, say16k):
     lat = room.latency[0]
     assert 0 < lat.end_of_speech <= lat.stt_done <= lat.first_token <= lat.first_audio
     assert not math.isnan(lat.reply_delay_s)
+
+
+@pytest.mark.parametrize("head", [True, False])
+async def test_wakes_in_a_noisy_hallway_thanks_to_the_head(voice_settings, models, head):
+    """A visitor (espeak-ng en-us+m3, 140 wpm) says "Hey Jarvis" in a hallway whose noise
+    is 5 dB under the voice: with the wake head the robot starts listening; without it the
+    same audio leaves it idle."""
+    from sage_robot.voice.audio_io import resample
+    from sage_robot.voice.tts import EspeakEngine
+
+    es = EspeakEngine("en-us+m3", 140)
+    visitor = resample(es.synthesize_sentence("Hey Jarvis."), es.sample_rate, 16000)
+    rms = float(np.sqrt(np.mean(visitor.astype(np.float64) ** 2)))
+    settings = voice_settings if head else voice_settings.model_copy(update={"wake_heads": {}})
+    room = Room(settings, models, noise_rms=rms / 10 ** (5 / 20))
+    audio = np.concatenate([silence(1.0), visitor, silence(1.0)])
+    end = room.clock.now() + len(audio) / 16000 + 0.5  # sim time: the mic is in lockstep
+    room.mic.inject(audio)
+    async with room:
+        await room.until(lambda: room.clock.now() > end or Phase.LISTENING in room.phases(),
+                         "the visitor's audio to be heard")  # fmt: skip
+    assert (Phase.LISTENING in room.phases()) is head, room.phases()
 
 
 async def test_without_a_brain_it_says_so(voice_settings, models, say16k):
