@@ -43,3 +43,10 @@ def test_emulated_mcu_and_lidar_are_found_and_talking():
     assert "frames/s" in checks["mcu"].detail and "ODOM" in checks["mcu"].detail
     assert checks["lidar"].ok, checks["lidar"].detail
     assert "spinning" in checks["lidar"].detail
+
+
+def test_a_wake_head_that_is_not_there_is_named(tmp_path):
+    settings = load_profile(None, {"voice": {"wake_heads": {"hey_jarvis": str(tmp_path / "gone.npz")}}})
+    models = next(c for c in run_checks(settings) if c.name == "models")
+    assert not models.ok and "gone.npz: no such file" in models.detail
+    assert models.fix and "wake_heads" in models.fix

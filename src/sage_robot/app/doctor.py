@@ -179,7 +179,27 @@ def check_models(settings: Settings) -> Check:
             "pip install 'sage-robot[all]'",
             essential=False,
         )
+    problem = _wake_files_problem(settings)
+    if problem:
+        return Check("models", False, problem, "fix voice.wake_models / voice.wake_heads in the profile",
+                     essential=False)  # fmt: skip
     return Check("models", True, "speech, wake word and embedding packages installed", essential=False)
+
+
+def _wake_files_problem(settings: Settings) -> str:
+    """The profile's wake models and heads, resolved: '' or what is wrong."""
+    from sage_robot.core.errors import ConfigError
+    from sage_robot.voice.wake import resolve_wake_model
+    from sage_robot.voice.wake_head import load_head
+
+    try:
+        for spec in settings.voice.wake_models:
+            resolve_wake_model(spec)
+        for head in settings.voice.wake_heads.values():
+            load_head(head)
+    except ConfigError as exc:
+        return str(exc)
+    return ""
 
 
 def _port_free(host: str, port: int) -> bool:
