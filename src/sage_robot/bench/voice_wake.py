@@ -203,6 +203,8 @@ def real_speech_in_noise(engine: Any, vs: Any) -> dict[str, Any]:
     from sage_robot.voice.wake import WakeDetector
 
     files = sorted(POCKETSPHINX.glob("**/*.wav")) + sorted(POCKETSPHINX.glob("*.raw"))
+    if not files:
+        return {"real_noisy_audio_s": 0.0, "real_noisy_note": f"no recordings in {POCKETSPHINX}"}
     gap = np.zeros(RATE // 2, dtype=np.int16)
     speech = np.concatenate([x for f in files for x in (load_audio(f), gap)]).astype(np.float64)
     rng = np.random.default_rng(13)
