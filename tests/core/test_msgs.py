@@ -28,6 +28,7 @@ EXAMPLES = [
     msgs.DiagnosticArray(10.0, (msgs.DiagnosticStatus("a", msgs.Level.OK, "fine"),)),
     msgs.Text("hello"),
     msgs.Event(11.0, "nav", "arrived", "at the cafe", {"place": "GUELLY_DELLY"}),
+    msgs.EStopState(True, "operator"),
     nav.NavigateGoal(place="the cafe"),
     nav.NavigateGoal(pose=msgs.Pose2D(1, 2, 3)),
     nav.NavigateFeedback(nav.NavState.WAITING_FOR_PEOPLE, "GUELLY_DELLY", 12.5, 30.0),

@@ -18,6 +18,7 @@ from sage_robot.hardware.mcu.bridge import SerialBridgeNode
 from sage_robot.sim.mcu_pty import McuSimNode
 
 SETTLE_TIMEOUT_S = 3.0  # real seconds to let the RX thread catch up (bounded)
+REPEAT_S = 0.1  # a held command is re-published this often, as teleop and the navigator do
 
 
 @dataclass
@@ -31,17 +32,28 @@ class Rig:
     imu: list[Imu] = field(default_factory=list)
     status: list[DiagnosticStatus] = field(default_factory=list)
     lost_odom: int = 0  # ODOM frames sent before the bridge listened (flushed on open)
+    held: Twist | None = None  # the command the rig keeps publishing (None: silent)
+    held_t: float = 0.0
 
     @property
     def firmware(self) -> Any:
         return self.sim.firmware
 
     def command(self, v: float, w: float = 0.0) -> None:
-        self.ctx.bus.publish(topics.CMD_VEL, Twist(v, w))
+        """Publish ``(v, w)`` and keep re-publishing it every REPEAT_S, as a live publisher does."""
+        self.held, self.held_t = Twist(v, w), self.clock.now()
+        self.ctx.bus.publish(topics.CMD_VEL, self.held)
+
+    def go_silent(self) -> None:
+        """The publisher stops publishing (crashed, frozen): the last command stands on the bus."""
+        self.held = None
 
     async def run(self, seconds: float, real_sleep_s: float = 0.0) -> None:
         """Step the simulation ``seconds`` (physics hooks, then the clock)."""
         for _ in range(round(seconds / SIM_STEP_S)):
+            if self.held is not None and self.clock.now() - self.held_t >= REPEAT_S - 1e-9:
+                self.held_t = self.clock.now()
+                self.ctx.bus.publish(topics.CMD_VEL, self.held)
             for hook in list(self.ctx.resources[SIM_STEP_HOOKS]):
                 hook(SIM_STEP_S)
             await self.clock.step(SIM_STEP_S)

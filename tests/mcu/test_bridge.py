@@ -48,8 +48,8 @@ async def test_stop_brings_the_motors_to_zero_within_the_watchdog_plus_ramp(rig:
     assert rig.firmware.last_command == (0.0, 0.0)
     assert all(now < before for now, before in zip(rig.firmware.pwm_us, pwm_moving, strict=True))
     p = rig.firmware.params
-    # The command profile decelerates at cmd_accel_mps2; the motors lag it by ~ their tau.
-    bound = 0.5 / p.cmd_accel_mps2 + 0.5 / p.max_accel_mps2
+    # A stop brakes at stop_decel_mps2 (the emergency deceleration); the motors lag it.
+    bound = 0.5 / p.stop_decel_mps2 + 0.5 / p.max_accel_mps2
     await rig.until(lambda: rig.firmware.stopped, bound)
     assert rig.firmware.pwm_us == (1500.0, 1500.0)
 
@@ -82,7 +82,7 @@ async def test_reverse_commands_never_drive_backwards(rig: Rig):
     assert rig.firmware.last_command[0] == 0.0 and rig.firmware.last_command[1] > 0
     assert rig.odom[-1].pose.theta > 0.2
     assert math.hypot(*rig.sim.floor.pose[:2]) < 0.01
-    assert rig.bridge.stats()["cmd_clamped"] == 2
+    assert rig.bridge.stats()["cmd_clamped"] >= 2  # both commands (each repeat counts too)
 
 
 async def test_commands_are_clamped_to_the_profile_limits(rig: Rig):
@@ -106,12 +106,31 @@ async def test_command_timeout_stops_a_stale_command():
     try:
         rig.command(0.3)
         await rig.run(0.4)
-        assert rig.firmware.last_command[0] > 0
+        rig.go_silent()  # the publisher dies: its last command stands on the bus
+        last_publish = rig.held_t
         await rig.run(0.3)
-        assert rig.firmware.last_command == (0.0, 0.0)
-        assert rig.bridge.stats()["cmd_timeouts"] == 1
+        assert rig.firmware.last_command[0] > 0  # 0.3 s of silence < 0.5 s timeout
+        took = await rig.until(lambda: rig.firmware.last_command == (0.0, 0.0), 1.0)
+        silent = rig.clock.now() - last_publish
+        assert 0.5 <= silent <= 0.5 + 0.05, f"zero on the wire {silent:.3f} s after the last command"
+        assert took > 0 and rig.bridge.stats()["cmd_timeouts"] == 1
     finally:
         await close_rig(rig)
+
+
+async def test_default_command_timeout_puts_zero_on_the_wire_within_0_3_s(rig: Rig):
+    """The bridge's own dead-man is on by default: a publisher that goes silent mid-drive
+    is stopped on the wire <= 0.3 s after its last command, and the firmware model brakes
+    to rest from 0.5 m/s within 0.6 s of that stop."""
+    rig.command(0.5)
+    await rig.run(2.0)
+    rig.go_silent()
+    last_publish = rig.held_t
+    await rig.until(lambda: rig.firmware.last_command == (0.0, 0.0), 1.0)
+    zero_after = rig.clock.now() - last_publish
+    assert zero_after <= 0.3, f"zero on the wire {zero_after:.3f} s after the last command"
+    at_rest = await rig.until(lambda: rig.firmware.stopped, 1.0)
+    assert at_rest <= 0.6, f"at rest {at_rest:.3f} s after the stop"
 
 
 async def test_shutdown_sends_a_stop(rig: Rig):

@@ -3,8 +3,27 @@
 A server is ``async def handler(goal, ctx) -> result``. It sends feedback with
 ``ctx.feedback(msg)``; a cancel arrives as ``asyncio.CancelledError`` inside the handler
 (clean up in ``finally``); raising :class:`ActionAborted` ends the goal as aborted with a
-reason a person understands. One goal runs at a time per server: a new goal preempts the
-running one, whose client sees ``PREEMPTED``.
+reason a person understands.
+
+One goal runs at a time per server, chosen by the server's policy:
+
+- ``preempt`` (the default, as for navigation): a new goal preempts the running one, whose
+  client sees ``PREEMPTED``;
+- ``queue`` (as for conversation): goals run one after another in arrival order; at most
+  ``max_queue`` wait, a goal beyond that ends at once as ``ABORTED`` ("busy").
+
+Nothing here can wedge (safety depends on it: the e-stop and the pages cancel goals):
+
+- :meth:`ActionRegistry.send_goal` never waits for another goal. The previous goal is asked
+  to stop and the new one starts its handler only once every earlier goal of the server
+  has wound down (at most :data:`PREEMPT_WAIT_S`; after that the new goal is aborted and
+  says why), so two handlers of one server never overlap.
+- Every goal ends with a result, whenever it is cancelled: before its handler ran, while it
+  waited for its turn, inside its handler, or by a server going away (``unserve``).
+- Every client wait is bounded: :meth:`GoalHandle.cancel` gives up after
+  :data:`CANCEL_WAIT_S` (raising :class:`GoalTimeout`; the cancel stays requested), and
+  :meth:`GoalHandle.result` takes a timeout. :meth:`GoalHandle.request_cancel` does not
+  wait at all (for the safety paths).
 """
 
 from __future__ import annotations
@@ -16,14 +35,19 @@ from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from enum import Enum
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
 
-from sage_robot.core.errors import ServiceUnavailable
+from sage_robot.core.errors import SageError, ServiceUnavailable
 
 if TYPE_CHECKING:
     from sage_robot.core.bus import Bus
 
 FEEDBACK_QUEUE = 32  # feedback messages kept per goal before the oldest is dropped
+CANCEL_WAIT_S = 5.0  # longest a client waits for a cancelled goal to wind down (wall s)
+PREEMPT_WAIT_S = 10.0  # longest a new goal waits for earlier goals to wind down (wall s)
+DEFAULT_MAX_QUEUE = 8  # goals that may wait behind the running one on a "queue" server
+
+Policy = Literal["preempt", "queue"]
 
 _log = logging.getLogger("sage.actions")
 
@@ -42,6 +66,10 @@ class GoalStatus(str, Enum):
 
 class ActionAborted(Exception):
     """Raised by a handler to end its goal as aborted; the message is the reason."""
+
+
+class GoalTimeout(SageError, TimeoutError):
+    """A bounded wait on a goal ran out (the goal goes on; a cancel stays requested)."""
 
 
 @dataclass(frozen=True)
@@ -80,14 +108,19 @@ class GoalHandle:
         self._result: ActionResult | None = None
         self._task: asyncio.Task[None] | None = None
         self._cancel_status = GoalStatus.CANCELED
+        self._cancel_requested = False
         self.last_feedback: Any = None
 
     def _push_feedback(self, msg: Any) -> None:
+        if self._result is not None:
+            return  # a handler that outlived its goal (it ignored the cancel): not news
         self._feedback.append(msg)
         self.last_feedback = msg
         self._changed.set()
 
     def _finish(self, result: ActionResult) -> None:
+        if self._result is not None:
+            return  # the first ending stands
         self._result = result
         self.status = result.status
         self._changed.set()
@@ -96,7 +129,20 @@ class GoalHandle:
     def done(self) -> bool:
         return self._result is not None
 
-    async def result(self) -> ActionResult:
+    @property
+    def cancel_requested(self) -> bool:
+        return self._cancel_requested
+
+    async def result(self, timeout: float | None = None) -> ActionResult:
+        """The goal's result; raises :class:`GoalTimeout` after ``timeout`` wall seconds."""
+        if timeout is None:
+            return await self._wait_result()
+        try:
+            return await asyncio.wait_for(self._wait_result(), timeout)
+        except asyncio.TimeoutError:
+            raise GoalTimeout(f"goal {self.goal_id} did not end within {timeout:g} s") from None
+
+    async def _wait_result(self) -> ActionResult:
         while self._result is None:
             self._changed.clear()
             await self._changed.wait()
@@ -112,25 +158,67 @@ class GoalHandle:
             self._changed.clear()
             await self._changed.wait()
 
-    async def cancel(self, status: GoalStatus = GoalStatus.CANCELED) -> ActionResult:
-        """Ask the server to stop this goal and wait for it to wind down."""
-        if self._task is not None and not self._task.done():
-            self._cancel_status = status
+    def request_cancel(self, status: GoalStatus = GoalStatus.CANCELED) -> None:
+        """Ask the server to stop this goal; returns at once (the result comes later)."""
+        if self._result is not None or self._cancel_requested:
+            return
+        self._cancel_requested, self._cancel_status = True, status
+        if self._task is not None:
             self._task.cancel()
-        return await self.result()
+
+    async def cancel(
+        self, status: GoalStatus = GoalStatus.CANCELED, timeout: float = CANCEL_WAIT_S
+    ) -> ActionResult:
+        """Ask the server to stop this goal and wait (at most ``timeout`` s) for it to wind down."""
+        self.request_cancel(status)
+        return await self.result(timeout)
 
 
 Handler = Callable[[Any, GoalContext], Awaitable[Any]]
 
 
 class ActionServer:
-    def __init__(self, name: str, handler: Handler) -> None:
-        self.name, self.handler = name, handler
-        self.active: GoalHandle | None = None
+    def __init__(
+        self, name: str, handler: Handler, policy: Policy = "preempt", max_queue: int = DEFAULT_MAX_QUEUE
+    ) -> None:
+        if policy not in ("preempt", "queue"):
+            raise ValueError(f"action {name}: unknown policy {policy!r} (preempt or queue)")
+        self.name, self.handler, self.policy, self.max_queue = name, handler, policy, max_queue
+        self.active: GoalHandle | None = None  # the goal that runs, or is next to run
+        self.waiting: deque[GoalHandle] = deque()  # "queue" policy: goals behind the active one
+        self._live: list[GoalHandle] = []  # goals whose task has not ended, oldest first
         self.counts = {s: 0 for s in GoalStatus}
 
-    async def _run(self, handle: GoalHandle) -> None:
+    def start(self, handle: GoalHandle) -> None:
+        """Take a new goal according to the policy (never waits)."""
+        if self.policy == "queue" and self.active is not None:
+            if len(self.waiting) >= self.max_queue:
+                self._end(handle, ActionResult(GoalStatus.ABORTED, None, f"{self.name} is busy; try again"))
+                return
+            self.waiting.append(handle)
+            self._launch(handle)
+            return
+        if self.active is not None:
+            self.active.request_cancel(GoalStatus.PREEMPTED)
+        self.active = handle
+        self._launch(handle)
+
+    def stop_all(self) -> None:
+        """The server goes away: every goal it holds ends (cancelled)."""
+        for handle in list(self._live):
+            handle.request_cancel()
+
+    def _launch(self, handle: GoalHandle) -> None:
+        earlier = [h._task for h in self._live if h._task is not None]
+        self._live.append(handle)
+        task = asyncio.get_running_loop().create_task(self._run(handle, earlier), name=f"action:{self.name}")
+        handle._task = task
+        task.add_done_callback(lambda _t: self._ended(handle))
+
+    async def _run(self, handle: GoalHandle, earlier: list[asyncio.Task[None]]) -> None:
         try:
+            if not await self._wait_turn(handle, earlier):
+                return
             value = await self.handler(handle.goal, GoalContext(handle))
             result = ActionResult(GoalStatus.SUCCEEDED, value)
         except asyncio.CancelledError:
@@ -140,11 +228,46 @@ class ActionServer:
         except Exception as exc:
             _log.exception("action %s failed", self.name)
             result = ActionResult(GoalStatus.ABORTED, None, f"internal error: {exc}")
-        finally:
-            if self.active is handle:
-                self.active = None
+        self._end(handle, result)
+
+    async def _wait_turn(self, handle: GoalHandle, earlier: list[asyncio.Task[None]]) -> bool:
+        """Wait until every earlier goal has ended (bounded); False when this goal ended instead."""
+        pending = [t for t in earlier if not t.done()]
+        if self.policy == "queue":
+            while pending:  # wait as long as the queue takes, one goal at a time
+                await asyncio.wait(pending)
+                pending = [t for t in earlier if not t.done()]
+            if self.waiting and self.waiting[0] is handle:
+                self.waiting.popleft()
+            self.active = handle
+            return True
+        if pending:
+            _, still = await asyncio.wait(pending, timeout=PREEMPT_WAIT_S)
+            if still:
+                _log.error("action %s: the previous goal ignored its cancel for %s s", self.name, PREEMPT_WAIT_S)
+                why = f"the previous {self.name} goal did not stop within {PREEMPT_WAIT_S:g} s"
+                self._end(handle, ActionResult(GoalStatus.ABORTED, None, why))
+                return False
+        return True
+
+    def _end(self, handle: GoalHandle, result: ActionResult) -> None:
+        if handle.done:
+            return
         self.counts[result.status] += 1
         handle._finish(result)
+        if handle in self.waiting:
+            self.waiting.remove(handle)
+        if self.active is handle:
+            self.active = self.waiting[0] if self.waiting else None
+
+    def _ended(self, handle: GoalHandle) -> None:
+        """The goal's task is over, however it ended: it must have a result."""
+        if handle in self._live:
+            self._live.remove(handle)
+        if handle in self.waiting:
+            self.waiting.remove(handle)
+        status = handle._cancel_status
+        self._end(handle, ActionResult(status, None, status.value))  # cancelled before it ran
 
 
 class ActionRegistry:
@@ -155,16 +278,18 @@ class ActionRegistry:
         self._servers: dict[str, ActionServer] = {}
         self._ids = itertools.count(1)
 
-    def serve(self, name: str, handler: Handler) -> ActionServer:
+    def serve(
+        self, name: str, handler: Handler, policy: Policy = "preempt", max_queue: int = DEFAULT_MAX_QUEUE
+    ) -> ActionServer:
         if name in self._servers:
             raise ValueError(f"action {name} is already served")
-        server = self._servers[name] = ActionServer(name, handler)
+        server = self._servers[name] = ActionServer(name, handler, policy, max_queue)
         return server
 
     def unserve(self, name: str) -> None:
         server = self._servers.pop(name, None)
-        if server and server.active and server.active._task:
-            server.active._task.cancel()
+        if server is not None:
+            server.stop_all()
 
     def has(self, name: str) -> bool:
         return name in self._servers
@@ -174,15 +299,11 @@ class ActionRegistry:
         return server.active if server else None
 
     async def send_goal(self, name: str, goal: Any) -> GoalHandle:
-        """Start a goal; a running goal on the same server is preempted first."""
+        """Start a goal (never waits for another goal); a running goal on a ``preempt``
+        server is asked to stop first and the new handler runs once it has."""
         server = self._servers.get(name)
         if server is None:
             raise ServiceUnavailable(f"no node serves the action {name}")
-        if server.active is not None:
-            await server.active.cancel(GoalStatus.PREEMPTED)
         handle = GoalHandle(next(self._ids), goal)
-        server.active = handle
-        handle._task = asyncio.get_running_loop().create_task(
-            server._run(handle), name=f"action:{name}"
-        )
+        server.start(handle)
         return handle

@@ -22,6 +22,7 @@ UI_STATE = "/sage/ui_state"  # voice.UiState: what the face shows
 EVENTS = "/sage/events"  # Event: arrivals, blocked by people, battery, safety stops
 SAY = "/sage/say"  # Text: something the robot should say
 DIAGNOSTICS = "/diagnostics"  # DiagnosticArray: node health
+ESTOP = "/sage/estop"  # EStopState, latched: the operator's latching e-stop
 MCU_STATUS = "/mcu/status"  # DiagnosticStatus: serial link state and statistics
 
 # Simulator-only truth (tests and benchmarks read these; nodes above sim never do)

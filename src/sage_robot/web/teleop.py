@@ -9,10 +9,15 @@
   a zero Twist at once. The deadman runs on wall time on purpose: it guards against a
   network that went quiet, which happens in real seconds even when the simulator runs
   faster than real time.
-- **E-stop** latches: while engaged every control message is refused with an error
-  reply, a zero Twist is published and navigation is cancelled — also a goal someone
-  else (the brain, a tour) starts meanwhile, within :data:`DEADMAN_CHECK_S`. Only an explicit
+- **E-stop** latches: engaging it publishes a zero Twist *first*, then the latched
+  ``/sage/estop`` state, then asks navigation to stop. While engaged every control message
+  is refused with an error reply and a goal someone else (the brain, a tour) starts
+  meanwhile is cancelled within :data:`DEADMAN_CHECK_S`. Only an explicit
   ``{"type": "estop", "engaged": false}`` from a logged-in operator releases it.
+- **Nothing here waits on navigation.** The deadman loop and the e-stop only *request*
+  cancels (:meth:`GoalHandle.request_cancel`); the cancel service is called from a task of
+  its own with a bound, so a navigator that hangs can never hold up a stop. The serial
+  bridge's own command timeout (``mcu.cmd_timeout_s``) is a third, independent layer.
 """
 
 from __future__ import annotations
@@ -24,13 +29,16 @@ import time
 from typing import Any
 
 from sage_robot.core import topics
+from sage_robot.core.actions import CANCEL_WAIT_S, GoalTimeout
 from sage_robot.core.log import get_logger
-from sage_robot.core.msgs import Event, Twist
+from sage_robot.core.msgs import EStopState, Event, Twist
 from sage_robot.core.node import Node
 
 CLIENT_REPEAT_S = 0.1  # the page re-sends a held command this often (s); documented for pages
-DEADMAN_CHECK_S = 0.05  # how often the deadman (and the e-stop hold) looks (s)
+DEADMAN_CHECK_S = 0.02  # how often the deadman (and the e-stop hold) looks (s)
+CANCEL_SERVICE_TIMEOUT_S = 1.0  # the e-stop's call of the navigator's cancel service (s)
 NAV_ACTIONS = (topics.NAVIGATE_TO, topics.TOUR)  # what the e-stop cancels
+MAX_CONTROL_INT = 10**6  # a JSON integer beyond this is no speed (and may not fit a float)
 
 _log = get_logger("web")
 
@@ -46,6 +54,8 @@ def parse_control(msg: dict[str, Any]) -> tuple[float, float]:
         value = msg.get(key, 0.0)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise BadMessage(f"control: {key!r} must be a number, got {value!r}")
+        if isinstance(value, int) and abs(value) > MAX_CONTROL_INT:
+            raise BadMessage(f"control: {key!r} is out of range, got a {len(str(abs(value)))}-digit number")
         if not math.isfinite(value):
             raise BadMessage(f"control: {key!r} must be finite, got {value!r}")
         out.append(float(value))
@@ -69,6 +79,8 @@ class Teleop:
         }  # fmt: skip
 
     def start(self) -> None:
+        self.bus.declare(topics.ESTOP, EStopState, latched=True)
+        self.bus.publish(topics.ESTOP, EStopState(bool(self.hub.estop), ""))
         self.node.spawn(self._deadman_loop(), "web.deadman")
 
     @property
@@ -98,9 +110,13 @@ class Teleop:
             self._publish(0.0, 0.0)
 
     async def set_estop(self, engaged: bool, who: str) -> None:
+        """Engage or release the e-stop; returns at once (it never waits for navigation)."""
         if engaged == self.estop:
             return
+        if engaged:
+            self._publish(0.0, 0.0)  # the wire first: nothing below may delay this
         self.hub.estop = engaged
+        self.bus.publish(topics.ESTOP, EStopState(engaged, who))
         self.hub.set("estop", {"type": "estop", "engaged": engaged})
         self.bus.publish(
             topics.EVENTS,
@@ -108,38 +124,54 @@ class Teleop:
         )
         _log.warning("e-stop engaged" if engaged else "e-stop released", by=who)
         if engaged:
-            self._publish(0.0, 0.0)
-            await self.cancel_navigation()
+            self.request_cancel_navigation()
 
-    async def _hold_estop(self) -> None:
+    def _hold_estop(self) -> None:
         """While the e-stop is engaged, a goal that anyone starts (the brain, a tour) is cancelled
         at once: the e-stop stops every motion, not only the operator's."""
         for action in NAV_ACTIONS:
-            if self.bus.actions.active(action) is not None:
+            active = self.bus.actions.active(action)
+            if active is not None and not active.cancel_requested:
                 self.counts["estop_cancels"] += 1
                 _log.warning("navigation goal during e-stop: cancelled", action=action)
-                await self.cancel_navigation()
-                self._publish(0.0, 0.0)
+                active.request_cancel()
+        if self.command != (0.0, 0.0):
+            self._publish(0.0, 0.0)
 
-    async def cancel_navigation(self) -> None:
+    def request_cancel_navigation(self) -> None:
+        """Ask every navigation goal to stop (no waiting), and the navigator's cancel service
+        from a task of its own (bounded)."""
         for action in NAV_ACTIONS:
             active = self.bus.actions.active(action)
             if active is not None:
-                with contextlib.suppress(Exception):
-                    await active.cancel()
+                active.request_cancel()
         if self.bus.has_service(topics.CANCEL_NAV):
-            with contextlib.suppress(Exception):
-                await self.bus.call(topics.CANCEL_NAV, None, timeout=1.0)
+            self.node.spawn(self._call_cancel_service(), "web.cancel_nav")
+
+    async def _call_cancel_service(self) -> None:
+        try:
+            await self.bus.call(topics.CANCEL_NAV, None, timeout=CANCEL_SERVICE_TIMEOUT_S)
+        except Exception as exc:  # the goals were already asked to stop; this is the backstop
+            _log.warning("navigation cancel service failed", error=str(exc))
+
+    async def cancel_navigation(self) -> None:
+        """Stop navigation and wait (bounded) until no goal runs: for the operator's Cancel."""
+        handles = [h for a in NAV_ACTIONS if (h := self.bus.actions.active(a)) is not None]
+        self.request_cancel_navigation()
+        for handle in handles:
+            with contextlib.suppress(GoalTimeout):
+                await handle.result(CANCEL_WAIT_S)
 
     def _publish(self, v: float, w: float) -> None:
         self.command = (v, w)
         self.bus.publish(topics.CMD_VEL, Twist(v, w))
 
     async def _deadman_loop(self) -> None:
+        """Runs until the node stops; every step is synchronous, so nothing can hold it up."""
         while True:
             await asyncio.sleep(DEADMAN_CHECK_S)
             if self.estop:
-                await self._hold_estop()
+                self._hold_estop()
             silent = time.monotonic() - self.last_control
             if self.command != (0.0, 0.0) and self.driver is not None and silent > self.deadman_s:
                 self.counts["deadman_stops"] += 1

@@ -36,10 +36,12 @@ class McuSettings(Section):
     imu_calibration_s: float = Field(5.0, ge=0, description="Still time for gyro bias (s).")
     reconnect_s: float = Field(1.0, gt=0, description="Delay between reopen attempts (s).")
     cmd_timeout_s: float = Field(
-        0.0,
+        0.25,
         ge=0,
-        description="A /cmd_vel older than this stops being re-sent and a stop is sent "
-        "instead (s); 0 = a command stands until the next one.",
+        description="A /cmd_vel older than this is replaced by a stop on the wire (s): the "
+        "bridge's own dead-man, independent of the web deadman and the MCU's watchdog. "
+        "Publishers of motion repeat their command (teleop every 0.1 s, the navigator at its "
+        "controller rate); 0 = a command stands until the next one.",
     )
 
 

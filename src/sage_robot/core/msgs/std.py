@@ -181,6 +181,14 @@ class Text:
 
 
 @message("foxglove/Json")
+class EStopState:
+    """The latching e-stop (latched on ``/sage/estop``): engaged, and who set it last."""
+
+    engaged: bool = False
+    by: str = ""
+
+
+@message("foxglove/Json")
 class Event:
     """Something that happened, for people and for other nodes: ``kind`` names it."""
 

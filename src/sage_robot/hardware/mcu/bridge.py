@@ -2,8 +2,10 @@
 
 - ``/cmd_vel`` -> CMD frames, clamped to the profile's limits (never reverse unless the
   profile allows it); a standing non-zero command is re-sent at ``mcu.resend_hz`` so the
-  MCU's 550 ms watchdog never trips mid-motion; a stop is sent on zero, when the command
-  grows older than ``mcu.cmd_timeout_s``, and on shutdown.
+  MCU's 550 ms watchdog never trips mid-motion; a stop is sent on zero, on shutdown, and
+  when the command grows older than ``mcu.cmd_timeout_s`` (0.25 s by default: the bridge's
+  own dead-man, looked at every :data:`CMD_TIMEOUT_CHECK_S` on a timer of its own, so it
+  does not depend on the web deadman or the navigator being alive).
 - A dedicated RX thread decodes ODOM -> ``/odom``, BATTERY -> ``/battery_state`` (the
   voltage averaged over ``BATTERY_SMOOTHING_TAU_S`` on the node's clock, so the motors'
   load sag does not swing the percentage) and
@@ -44,6 +46,7 @@ from sage_robot.hardware.mcu.convert import (
 from sage_robot.hardware.mcu.port import find_port, open_port
 
 PORT_RESOURCE = "mcu_port"  # ctx.resources key: a port path set by the simulator
+CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
 LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
 STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
 RX_JOIN_TIMEOUT_S = 1.0  # the RX thread wakes every READ_TIMEOUT_S, so this is ample
@@ -82,6 +85,8 @@ class SerialBridgeNode(Node):
         self.bus.declare(topics.MCU_STATUS, DiagnosticStatus)
         self.subscribe(topics.CMD_VEL, Twist, self._on_cmd_vel)
         self.every(1.0 / self.mcu.resend_hz, self._resend, "serial_bridge.resend")
+        if self.mcu.cmd_timeout_s > 0:
+            self.every(CMD_TIMEOUT_CHECK_S, self._check_timeout, "serial_bridge.cmd_timeout")
         self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
         self.spawn(self._link_loop(), "serial_bridge.link")
 
@@ -100,14 +105,20 @@ class SerialBridgeNode(Node):
         self._write(v, w)
 
     def _resend(self) -> None:
-        if self.command == (0.0, 0.0):
+        if self.command == (0.0, 0.0) or self._check_timeout():
             return
-        timeout = self.mcu.cmd_timeout_s
-        if timeout > 0 and self.clock.now() - self._command_t > timeout:
-            self.log.warning("no /cmd_vel for a while: stopping", timeout_s=timeout)
-            self.counters["cmd_timeouts"] += 1
-            self.command = (0.0, 0.0)
         self._write(*self.command)
+
+    def _check_timeout(self) -> bool:
+        """Stop a command nobody repeats any more; True when it did."""
+        timeout = self.mcu.cmd_timeout_s
+        if self.command == (0.0, 0.0) or timeout <= 0 or self.clock.now() - self._command_t <= timeout:
+            return False
+        self.log.warning("no /cmd_vel for a while: stopping", timeout_s=timeout)
+        self.counters["cmd_timeouts"] += 1
+        self.command = (0.0, 0.0)
+        self._write(0.0, 0.0)
+        return True
 
     def _write(self, v: float, w: float) -> None:
         port = self._port

@@ -130,6 +130,10 @@ class FirmwareModel:
             )
             left, right = self._targets
             self._profile = (0.5 * (left + right), (right - left) / p.track_width_m)
+        elif self._cmd == (0.0, 0.0):
+            self._targets = _brake(self._targets, p.stop_decel_mps2 * dt)
+            left, right = self._targets
+            self._profile = (0.5 * (left + right), (right - left) / p.track_width_m)
         else:
             v, w = self._profile
             v = _slew(v, self._cmd[0], p.cmd_accel_mps2 * dt)
@@ -183,6 +187,16 @@ class FirmwareModel:
 def _slew(value: float, goal: float, step: float) -> float:
     """``value`` moved toward ``goal`` by at most ``step``."""
     return goal if abs(goal - value) <= step else value + math.copysign(step, goal - value)
+
+
+def _brake(targets: tuple[float, float], step: float) -> tuple[float, float]:
+    """Wheel targets moved toward zero together: the faster wheel by ``step``, the other in
+    proportion, so both reach zero at once and the curvature does not change."""
+    fastest = max(abs(targets[0]), abs(targets[1]))
+    if fastest <= step:
+        return (0.0, 0.0)
+    scale = (fastest - step) / fastest
+    return (targets[0] * scale, targets[1] * scale)
 
 
 def _next_due(due: float, period: float, now: float) -> float:

@@ -68,6 +68,10 @@ class FirmwareParams:
     # than at its start and the robot over-rotates, ~6 deg per quarter turn).
     cmd_accel_mps2: float = 0.8
     cmd_alpha_radps2: float = 3.0
+    # A stop command (v = w = 0) brakes instead: both wheel targets fall to zero together
+    # (the path's curvature is kept) at this rate, near the traction limit. This is the
+    # emergency deceleration every safety stop relies on (deadman, e-stop, command timeout).
+    stop_decel_mps2: float = 1.5
     watchdog_s: float = WATCHDOG_S
     watchdog_ramp_mps2: float = 2.0  # how fast the targets ramp to zero after a trip
     max_cmd_v_mps: float = 1.0  # the firmware's own clamp on a received command
