@@ -58,6 +58,7 @@ class KinematicSim:
         self._contact = False
         self.t = 0.0
         self.k = 0
+        self.nodes: list[Any] = []
         self.angles = beam_angles()
         bus.subscribe(topics.CMD_VEL, Twist, self._on_cmd, maxsize=1000)
 
@@ -148,6 +149,7 @@ async def running(settings: Settings, grid: OccupancyGrid, start: tuple[float, f
     ctx = NodeContext(bus, clock, settings)
     sim = KinematicSim(bus, grid, start, settings, **sim_kw)
     nodes = [MapServerNode(ctx), LocalizationNode(ctx), NavigatorNode(ctx)]
+    sim.nodes = nodes  # for tests that restart one
     for n in nodes:
         await n.setup()
     stop = asyncio.Event()

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from sage_robot.core import topics
-from sage_robot.core.actions import ActionAborted, GoalContext
+from sage_robot.core.actions import ActionAborted, GoalContext, GoalTimeout
 from sage_robot.core.geometry import compose
 from sage_robot.core.msgs import Event, LaserScan, Odometry, Pose2D, PoseStamped, Text, Twist
 from sage_robot.core.msgs import Path as PathMsg
@@ -162,11 +162,10 @@ class NavigatorNode(Node):
 
     # ------------------------------------------------------------ services
     async def _cancel(self, _request: Any) -> Text:
+        self.stop()  # the wire first; the goals wind down after
         stopped = []
         for action in (topics.TOUR, topics.NAVIGATE_TO):
-            handle = self.bus.actions.active(action)
-            if handle is not None:
-                await handle.cancel()
+            if await self._end_goal(action):
                 stopped.append(action)
         self.stop()
         return Text("canceled " + ", ".join(stopped) if stopped else "nothing to cancel")
@@ -193,10 +192,19 @@ class NavigatorNode(Node):
         spoken = place.name.replace("_", " ").lower()
         return Target(place.name, spoken, place.pose.as_tuple())
 
+    async def _end_goal(self, action: str) -> bool:
+        """Cancel the running goal of ``action`` and wait (bounded) for it; False when none ran."""
+        handle = self.bus.actions.active(action)
+        if handle is None:
+            return False
+        try:
+            await handle.cancel()
+        except GoalTimeout:
+            self.log.error("a navigation goal did not wind down after its cancel", action=action)
+        return True
+
     async def _navigate(self, goal: NavigateGoal, ctx: GoalContext) -> NavigateResult:
-        tour = self.bus.actions.active(topics.TOUR)
-        if tour is not None:  # a new goal from outside ends a running tour
-            await tour.cancel()
+        await self._end_goal(topics.TOUR)  # a new goal from outside ends a running tour
         target = self.resolve(goal)
         return await self.drive_to(target, ctx.feedback)
 
@@ -212,9 +220,7 @@ class NavigatorNode(Node):
                 self.set_state(IDLE)
 
     async def _tour(self, goal: TourGoal, ctx: GoalContext) -> TourResult:
-        nav = self.bus.actions.active(topics.NAVIGATE_TO)
-        if nav is not None:
-            await nav.cancel()
+        await self._end_goal(topics.NAVIGATE_TO)
         if not 0 <= goal.start_index <= len(goal.places):
             raise ActionAborted(f"start_index {goal.start_index} is outside the tour of {len(goal.places)}")
         completed: list[str] = []

@@ -365,7 +365,7 @@ class VoicePipeline:
             return False
         finally:
             if not handle.done:
-                await handle.cancel()
+                handle.request_cancel()  # barge-in or timeout: the brain stops by itself
         return bool(tokens)
 
     def _first_audio(self, times: TurnTimes) -> None:

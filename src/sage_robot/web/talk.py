@@ -19,6 +19,7 @@ from fastapi import APIRouter, HTTPException, Request, UploadFile
 from fastapi.responses import Response
 
 from sage_robot.core import topics
+from sage_robot.core.actions import GoalTimeout
 from sage_robot.core.errors import SageError
 from sage_robot.core.log import get_logger
 from sage_robot.core.msgs import Text
@@ -62,11 +63,11 @@ async def converse(request: Request, question: str) -> str:
     bus = state_of(request).node.bus
     if not bus.actions.has(topics.CONVERSE):
         raise HTTPException(status_code=503, detail="the brain is not running")
-    handle = await bus.actions.send_goal(topics.CONVERSE, Text(question))
-    try:
-        result = await asyncio.wait_for(handle.result(), CONVERSE_TIMEOUT_S)
-    except asyncio.TimeoutError:
-        await handle.cancel()
+    handle = await bus.actions.send_goal(topics.CONVERSE, Text(question))  # never waits
+    try:  # the bound covers the wait behind other visitors' questions and the answer
+        result = await handle.result(CONVERSE_TIMEOUT_S)
+    except GoalTimeout:
+        handle.request_cancel()
         raise HTTPException(status_code=504, detail="the brain took too long to answer") from None
     if not result.ok:
         raise HTTPException(status_code=502, detail=f"the brain could not answer: {result.message}")
