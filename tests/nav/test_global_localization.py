@@ -157,7 +157,9 @@ def test_global_localization_in_the_default_building_converges_along_a_corridor(
     truth = (84.5, 39.8, math.pi)
     assert pf.field.distances(np.linspace(70.0, 85.0, 50), np.full(50, 39.8)).min() > 0.5
     region_m2 = len(pf.region) * data.grid.resolution**2
-    assert 1000 < region_m2 < 0.6 * len(pf.field.free_cells) * data.grid.resolution**2  # not the outside
+    assert 1000 < region_m2 < len(pf.field.free_cells) * data.grid.resolution**2
+    assert (data.grid.data[pf.region[:, 0], pf.region[:, 1]] == 0).all()  # known floor, not the outside
+    assert (data.grid.data == -1).sum() > (data.grid.data == 0).sum()  # the outside loads as unknown
     pf.global_localization(_scan(data.grid, truth))
     pf.update(truth, *_scan(data.grid, truth))
     errors = []

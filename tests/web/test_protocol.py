@@ -309,3 +309,59 @@ def test_knowledge_base_routes_are_mounted_with_the_operator_login(robot: Any, c
     assert resp.status_code == 503 and "knowledge base" in resp.json()["error"]
     resp = client.delete("/api/kb/documents/1")  # a write: the operator login comes first
     assert resp.status_code == 401
+
+
+def test_a_wedged_goal_cannot_hold_up_the_estop_or_the_deadman(
+    robot: Any, cookie: str, cmd_log: list[tuple[float, Twist]]
+) -> None:
+    """Regression (issue: a double click jammed navigation and then the deadman). A goal whose
+    handler ignores its cancel is running when the e-stop is pressed: the press puts a stop on
+    /cmd_vel at once, and after release a 0.3 m/s command that goes silent is still stopped by
+    the deadman within its bound."""
+    import asyncio
+
+    from sage_robot.core.actions import GoalContext
+
+    async def stubborn(goal: Any, ctx: GoalContext) -> None:
+        while True:  # broken code: swallows every cancel
+            try:
+                await asyncio.sleep(3600)
+            except asyncio.CancelledError:
+                continue
+
+    name = topics.NAVIGATE_TO  # what the e-stop cancels: the old e-stop awaited that cancel
+    original = robot.call(lambda: robot.bus.actions.unserve(name))
+    robot.call(lambda: robot.bus.actions.serve(name, stubborn))
+    teleop = robot.web_node().teleop
+    try:
+        handle = robot.run(robot.bus.actions.send_goal(name, None))
+        before = len(cmd_log)
+        t0 = time.monotonic()
+        robot.run(teleop.set_estop(True, "test"), timeout=1.0)  # never waits on navigation
+        assert time.monotonic() - t0 < 1.0
+        deadline = time.monotonic() + WAIT_S
+        while time.monotonic() < deadline and not any(m.is_zero for _, m in cmd_log[before:]):
+            time.sleep(0.005)
+        assert any(m.is_zero for _, m in cmd_log[before:]), "the e-stop put a stop on /cmd_vel"
+        robot.run(teleop.set_estop(False, "test"), timeout=1.0)
+        stops = teleop.counts["deadman_stops"]
+        with teleop_ws(robot, cookie) as ws:
+            t_sent = time.monotonic()
+            ws.send(json.dumps({"type": "control", "x": 0.3, "z": 0.0}))
+            deadline = t_sent + WAIT_S
+            while time.monotonic() < deadline and teleop.counts["deadman_stops"] == stops:
+                time.sleep(0.005)
+            assert teleop.counts["deadman_stops"] == stops + 1, "the deadman stopped the silent command"
+        assert handle.cancel_requested and not handle.done  # asked to stop; nothing waited for it
+    finally:
+        robot.call(lambda: (robot.bus.actions.unserve(name), robot.bus.actions.serve(name, original.handler)))
+
+
+def test_a_huge_number_is_an_error_reply_not_a_dropped_socket(robot: Any, cookie: str) -> None:
+    with teleop_ws(robot, cookie) as ws:
+        ws.send('{"type": "control", "x": 1' + "0" * 400 + ', "z": 0}')
+        reply = recv_json(ws, "error")
+        assert "x" in reply["error"]
+        ws.send(json.dumps({"type": "ping", "t": 7}))
+        assert recv_json(ws, "pong")["t"] == 7  # the same socket still answers
+    assert robot.web_node().teleop.command == (0.0, 0.0)

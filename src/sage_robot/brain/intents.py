@@ -23,6 +23,7 @@ INTENTS = (
     "where_is",
     "cancel",
     "where_am_i",
+    "status",
     "battery",
     "ip_address",
     "tour",
@@ -91,11 +92,24 @@ def _any(*patterns: str) -> re.Pattern[str]:
     return re.compile("|".join(f"(?:{p})" for p in patterns))
 
 
+CANCEL_FIRST = re.compile(r"^(stop|cancel|halt|abort|never ?mind|forget it|wait|hold on|freeze)\b")
 CANCEL = _any(
-    r"^(stop|cancel|halt|abort|never ?mind|forget it|wait|hold on|freeze)\b",
+    CANCEL_FIRST.pattern,
     r"\b(cancel|abort)\b",
     r"\bstop (moving|navigating|driving|going|the (tour|robot))\b",
     r"\bdo not go\b",
+)
+# What the robot is doing now ("why did you stop" is a question, not a cancel).
+STATUS = _any(
+    r"\bwhere are (you|we) (going|headed|heading)\b",
+    r"\bwhere are you taking (me|us)\b",
+    r"\bwhat are you (doing|up to)\b",
+    r"\bwhy (arent|are) (you|we)( not)? (moving|going|driving)\b",
+    r"\bwhy (is|isnt) (it|the robot)( not)? (moving|going|driving)\b",
+    r"\bwhy (did|have) (you|we|it) stop",
+    r"\bwhy can (you|we) not (move|go|drive)\b",
+    r"\bare you (moving|stuck|stopped|broken)\b",
+    r"\bwhat is (your|the robots) status\b",
 )
 IP = _any(r"\bip\b", r"\bnetwork address\b", r"\bon the network\b", r"\bip address", r"\bhost ?name\b")
 BATTERY = _any(
@@ -219,6 +233,8 @@ def classify(text: str, places: Places) -> Intent:
 
 
 def _classify(t: str, places: Places) -> Intent:
+    if STATUS.search(t) and not CANCEL_FIRST.match(t):
+        return Intent("status")
     if CANCEL.search(t):
         return Intent("cancel")
     if IP.search(t):

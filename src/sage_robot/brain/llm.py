@@ -190,7 +190,10 @@ class LlmBrain(Brain):
         today = self._today() if self._today else None
         return {
             "role": "system",
-            "content": system_prompt(self.settings.robot.name, places, self.robot.nav, today),
+            "content": system_prompt(
+                self.settings.robot.name, places, self.robot.motion(), today,
+                safety=self.robot.readiness().describe(),
+            ),
         }
 
     def _flat_history(self) -> list[Message]:

@@ -24,7 +24,7 @@ from sage_robot.core import topics
 from sage_robot.core.actions import GoalContext
 from sage_robot.core.clock import Clock
 from sage_robot.core.config import Settings
-from sage_robot.core.msgs import BatteryState, Event, Text
+from sage_robot.core.msgs import Event, Text
 from sage_robot.core.node import Node
 from sage_robot.core.paths import waypoints_yaml
 
@@ -47,16 +47,18 @@ class BrainNode(Node):
     name = "brain"
 
     async def setup(self) -> None:
-        self.robot = RobotLink(self.bus, waypoints_yaml(self.settings))
+        self.robot = RobotLink(self.bus, waypoints_yaml(self.settings), self.settings.battery)
         self.robot.on_failure = self._nav_failed
         self.brain = make_brain(self.settings, self.robot, self.clock)
         self._lock = asyncio.Lock()
         self._last_turn = self.clock.now()
         self.turns = 0
         self.events_spoken = 0
-        self.subscribe(topics.BATTERY, BatteryState, self.robot.on_battery, maxsize=1)
+        for topic, msg_type, callback in self.robot.subscriptions():  # battery, e-stop, nav, localization
+            self.subscribe(topic, msg_type, callback, maxsize=1)
         self.subscribe(topics.EVENTS, Event, self._on_event, maxsize=20)
-        self.bus.actions.serve(topics.CONVERSE, self._converse)
+        # One conversation: visitors' questions (voice, /talk, typed) are answered in turn.
+        self.bus.actions.serve(topics.CONVERSE, self._converse, policy="queue")
 
     async def teardown(self) -> None:
         self.bus.actions.unserve(topics.CONVERSE)

@@ -29,6 +29,8 @@ from sage_robot.brain.phrases import (
     spoken_ip,
     upper_first,
 )
+from sage_robot.brain.readiness import Refusal
+from sage_robot.brain.robot import NavStatus
 from sage_robot.brain.speech import split_sentences
 from sage_robot.brain.tools import ToolCall, ToolRegistry
 from sage_robot.core.places import Place
@@ -37,12 +39,36 @@ KB_TOP_K = 3
 DESCRIBE_KB_SENTENCES = 2  # sentences from the KB after a place's own description
 NEAR_M = 3.0  # closer than this to a place is "at" it
 PLACES_SPOKEN = 6  # places named in a list before "and more"
+# A drive refused for these is answered with the refusal itself, a whole spoken sentence.
+SPOKEN_REFUSALS = frozenset({Refusal.ESTOP.value, Refusal.BATTERY.value, Refusal.LOST.value})
+ESTOP_STOPPED = "I am stopped: the emergency stop is on. An operator has to release it."
 
 
 def join_names(names: list[str]) -> str:
     if len(names) <= 1:
         return "".join(names)
     return ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _target(motion: NavStatus) -> str:
+    return place_phrase(motion.target) if motion.target else "a spot on my map"
+
+
+def _moving_line(motion: NavStatus) -> str:
+    """What a robot on its way says it is doing, from the navigator's state."""
+    where = _target(motion)
+    state = motion.state
+    if state == "waiting_for_people":
+        return f"I am waiting for people to make room, on the way to {where}."
+    if state == "recovering":
+        return f"I am finding a way around something in my path, on the way to {where}."
+    if state == "lost":
+        return f"I have lost track of where I am, so I am looking around before going on to {where}."
+    dist = motion.distance_remaining_m
+    togo = f", about {round(dist)} meters to go" if dist >= 1 else ""
+    if motion.touring:
+        return f"We are on a tour, heading to {where}{togo}."
+    return f"I am on my way to {where}{togo}."
 
 
 Handler = Callable[[Intent, str], Awaitable[str]]
@@ -68,6 +94,7 @@ class OfflineBrain(Brain):
             "where_is": self._where_is,
             "cancel": self._cancel,
             "where_am_i": self._where_am_i,
+            "status": self._status,
             "battery": self._battery,
             "ip_address": self._ip,
             "tour": self._tour,
@@ -140,8 +167,19 @@ class OfflineBrain(Brain):
             return await self._unknown_place(intent.slot)
         call = await self._tool("set_goal", {"location": intent.place.name})
         if not call.result.ok:
+            if call.result.data.get("refused") in SPOKEN_REFUSALS:
+                return call.result.error
             return f"Sorry, I can not take you to {place_phrase(intent.place)}: {call.result.error}."
-        return f"Sure, follow me to {place_phrase(intent.place)}!"
+        return f"Sure, follow me to {place_phrase(intent.place)}!"  # only once the goal was taken
+
+    def _offer_to_go(self, place: Place, offer: str) -> str:
+        """``offer`` (and remember it for a "yes"), or why the robot can not go now."""
+        refused = self.robot.readiness().refuse_drive(place.name)
+        if refused is None:
+            self._offer = place
+            return offer
+        self._offer = None
+        return refused[1]
 
     async def _unknown_place(self, slot: str) -> str:
         places = await self.robot.places()
@@ -154,9 +192,9 @@ class OfflineBrain(Brain):
 
     async def _where_is(self, intent: Intent, text: str) -> str:
         assert intent.place is not None
-        self._offer = intent.place
         what = f": {lower_first(intent.place.description.rstrip('.'))}" if intent.place.description else ""
-        return f"{upper_first(place_phrase(intent.place))} is on my map{what}. Shall I take you there?"
+        offer = self._offer_to_go(intent.place, "Shall I take you there?")
+        return f"{upper_first(place_phrase(intent.place))} is on my map{what}. {offer}"
 
     async def _cancel(self, intent: Intent, text: str) -> str:
         call = await self._tool("cancel_goal")
@@ -177,6 +215,22 @@ class OfflineBrain(Brain):
         if d["distance_m"] <= NEAR_M:
             return f"We are at {place}."
         return f"We are about {round(d['distance_m'])} meters from {place}."
+
+    async def _status(self, intent: Intent, text: str) -> str:
+        """What the robot is doing: the e-stop first, then the drive, then what holds it."""
+        ready, motion = self.robot.readiness(), self.robot.motion()
+        if ready.estop:
+            was = f" I was on my way to {_target(motion)}." if motion.navigating else ""
+            return ESTOP_STOPPED + was
+        if motion.navigating:
+            return _moving_line(motion)
+        if ready.lost:
+            return "I am standing still, because I have lost track of where I am on my map. " \
+                   "An operator can set my position."
+        refused = ready.refuse_drive("")
+        if refused is not None and refused[0] is Refusal.BATTERY:
+            return f"I am standing still. {refused[1]}"
+        return "I am standing still, ready to go. Where would you like to go?"
 
     async def _battery(self, intent: Intent, text: str) -> str:
         call = await self._tool("battery_status")
@@ -199,6 +253,8 @@ class OfflineBrain(Brain):
         args = {"theme": intent.slot} if intent.slot else {}
         call = await self._tool("start_tour", args)
         if not call.result.ok:
+            if call.result.data.get("refused") in SPOKEN_REFUSALS:
+                return call.result.error
             return f"Sorry, I can not start a tour: {call.result.error}."
         stops = call.result.data["stops"]
         return (
@@ -218,7 +274,6 @@ class OfflineBrain(Brain):
         its talking points), without saying the same thing twice; then an offer to go."""
         place = intent.place
         assert place is not None
-        self._offer = place
         call = await self._tool("describe_place", {"name": place.name})
         d = call.result.data if call.result.ok else {}
         desc = str(d.get("description") or place.description or "one of the places on my tour")
@@ -227,7 +282,7 @@ class OfflineBrain(Brain):
         for sentence in split_sentences(more)[:DESCRIBE_KB_SENTENCES]:
             if not repeats(sentence, said):
                 said += " " + sentence
-        return said + " Would you like to go there?"
+        return said + " " + self._offer_to_go(place, "Would you like to go there?")
 
     async def _about_place(self, place: Place) -> str:
         """One or two sentences about ``place`` from the knowledge base ('' when none)."""

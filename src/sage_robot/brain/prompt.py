@@ -1,4 +1,4 @@
-"""The system prompt, rebuilt before every turn: persona, date, places, navigation status."""
+"""The system prompt, rebuilt before every turn: persona, date, places, navigation and safety status."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ Engineering: a friendly, witty and concise tour guide on wheels.
 
 Today is {date}.
 Navigation status: {status}.
+Safety status: {safety}.
 
 Places you can take visitors (name: description):
 {places}
@@ -23,6 +24,9 @@ numbers and units as words a person would say.
 - Keep replies short: one to three sentences unless the visitor asks for more.
 - To go somewhere, call set_goal with the place name. Set only one goal at a time and \
 never chain destinations without an arrival. Say where you are heading while you go.
+- Only say "follow me" (or that you are going, or that the tour starts) when set_goal or \
+start_tour returned goal_started true. When it returns an error, or the safety status says \
+the emergency stop is engaged, the robot is not moving: say why in plain words.
 - Use kb_search first for questions about the university, its programs, people and \
 buildings; use web_search only for general knowledge or current events.
 - When a tool returns an error, tell the visitor briefly and honestly, or try again with \
@@ -38,11 +42,14 @@ def place_lines(places: Places) -> str:
     return "\n".join(f"{p.name}: {p.description or 'no description'}" for p in places)
 
 
-def system_prompt(robot_name: str, places: Places, nav: NavStatus, today: dt.date | None = None) -> str:
+def system_prompt(
+    robot_name: str, places: Places, nav: NavStatus, today: dt.date | None = None, safety: str = ""
+) -> str:
     day = today or dt.date.today()
     return PERSONA.format(
         name=robot_name,
         date=day.strftime("%A, %B %d, %Y").replace(" 0", " "),
         status=nav.describe(),
+        safety=safety or "unknown",
         places=place_lines(places),
     )

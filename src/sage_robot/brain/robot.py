@@ -1,29 +1,45 @@
-"""The brain's view of the robot: navigation, places, battery and the knowledge base,
-reached only through the bus (actions and services other nodes serve).
+"""The brain's view of the robot: navigation, places, battery, e-stop, localization and
+the knowledge base, reached only through the bus (actions and services other nodes serve).
 
 Every method returns a value: when a service or action is not there (its node is not
 running yet) the answer says so in words a person (or a model) can use; nothing raises
 for an expected failure. Services that take no arguments are called with ``Text("")``.
+
+A drive or a tour starts only when :mod:`sage_robot.brain.readiness` allows it (e-stop,
+battery, localization) and counts as started only when navigation took the goal: it did
+not abort it at once (unknown place, no pose) within ``ACCEPT_WAIT_S``.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sage_robot.brain.readiness import (
+    LOST_CONFIRM_S,
+    NAV_DOWN_LINE,
+    TOUR_DOWN_LINE,
+    Readiness,
+    Refusal,
+)
 from sage_robot.core import topics
-from sage_robot.core.actions import GoalHandle, GoalStatus
+from sage_robot.core.actions import GoalHandle, GoalStatus, GoalTimeout
 from sage_robot.core.bus import Bus
+from sage_robot.core.config.robot import BatterySettings
 from sage_robot.core.errors import ConfigError, ServiceError
-from sage_robot.core.msgs import BatteryState, Event, Text
+from sage_robot.core.msgs import BatteryState, EStopState, Event, Text
 from sage_robot.core.msgs.kb import Passage, SearchRequest, SearchResponse
 from sage_robot.core.msgs.nav import (
+    LocalizationHealth,
     NavigateFeedback,
     NavigateGoal,
+    NavState,
     PlaceList,
     TourFeedback,
     TourGoal,
@@ -34,6 +50,9 @@ from sage_robot.core.places import Place, Places, load_places
 PLACES_TTL_S = 30.0  # how long a fetched place list is trusted before asking again
 SERVICE_TIMEOUT_S = 3.0  # nav and kb service calls from a conversation turn
 KB_TIMEOUT_S = 8.0  # a knowledge-base search may embed the query first
+ACCEPT_WAIT_S = 0.5  # wall time a new goal has to show feedback or fail before it counts as taken
+ACCEPT_POLL_S = 0.01
+HEALTH_STALE_S = 5.0  # a localization health older than this (bus clock) no longer says "lost"
 
 _log = logging.getLogger("sage.brain")
 
@@ -45,6 +64,7 @@ class Outcome:
     ok: bool
     reason: str = ""
     data: Any = None
+    refused: Refusal | None = None  # set when a drive was not started, and why
 
 
 @dataclass
@@ -62,16 +82,31 @@ class NavStatus:
             return "idle, standing still"
         what = "on a tour, heading" if self.touring else "navigating"
         dist = f", {self.distance_remaining_m:.0f} meters to go" if self.distance_remaining_m else ""
-        return f"{what} to {self.target} ({self.state}{dist})"
+        return f"{what} to {self.target or 'a point on the map'} ({self.state}{dist})"
+
+    @classmethod
+    def from_navigator(cls, fb: NavigateFeedback) -> NavStatus:
+        """The navigator's own state (``/nav/state``): a goal someone else sent."""
+        return cls(True, fb.place, fb.state.value, fb.distance_remaining_m)
 
 
 class RobotLink:
-    """Bus-facing helper shared by the tools, the prompt and the offline brain."""
+    """Bus-facing helper shared by the tools, the prompt and the offline brain. Feed it
+    with :meth:`subscriptions` (the brain node subscribes each)."""
 
-    def __init__(self, bus: Bus, fallback_places: Path | None = None) -> None:
+    def __init__(
+        self, bus: Bus, fallback_places: Path | None = None, battery: BatterySettings | None = None
+    ) -> None:
         self.bus = bus
         self.fallback_places = fallback_places
+        levels = battery or BatterySettings()
+        self.battery_critical, self.battery_low = levels.critical_fraction, levels.warn_fraction
         self.battery: BatteryState | None = None
+        self.estop: EStopState | None = None
+        self.nav_state: NavigateFeedback | None = None  # the navigator's, whoever sent the goal
+        self.health: LocalizationHealth | None = None
+        self._health_at = -math.inf
+        self._lost_since: float | None = None
         self.nav = NavStatus()
         self._places: Places | None = None
         self._places_at = -1e18
@@ -81,12 +116,85 @@ class RobotLink:
         self.on_failure: Callable[[str, str], None] | None = None
 
     # ------------------------------------------------------------ bus inputs
+    def subscriptions(self) -> list[tuple[str, type, Callable[[Any], None]]]:
+        """(topic, type, callback) for everything this link listens to."""
+        return [
+            (topics.BATTERY, BatteryState, self.on_battery),
+            (topics.ESTOP, EStopState, self.on_estop),
+            (topics.NAV_STATE, NavigateFeedback, self.on_nav_state),
+            (topics.LOC_HEALTH, LocalizationHealth, self.on_health),
+        ]
+
     def on_battery(self, msg: BatteryState) -> None:
         self.battery = msg
+
+    def on_estop(self, msg: EStopState) -> None:
+        self.estop = msg
+
+    def on_nav_state(self, msg: NavigateFeedback) -> None:
+        self.nav_state = msg
+
+    def on_health(self, msg: LocalizationHealth) -> None:
+        now = self.bus.clock.now()
+        self.health, self._health_at = msg, now
+        if not msg.lost:
+            self._lost_since = None
+        elif self._lost_since is None:
+            self._lost_since = now
 
     def on_event(self, event: Event) -> None:
         if event.kind == "arrived" and not self.nav.touring:
             self.nav = NavStatus()
+
+    # ------------------------------------------------------------ state
+    def battery_fraction(self) -> float | None:
+        """The charge 0..1, or None when unknown (no reading, or NaN)."""
+        b = self.battery
+        if b is None or not math.isfinite(b.percentage):
+            return None
+        return min(max(b.percentage, 0.0), 1.0)
+
+    def lost(self) -> bool:
+        """Localization has said "lost" for ``LOST_CONFIRM_S`` and is still talking, or the
+        navigator itself reports being lost."""
+        if self.nav_state is not None and self.nav_state.state is NavState.LOST:
+            return True
+        now = self.bus.clock.now()
+        return (
+            self._lost_since is not None
+            and now - self._health_at <= HEALTH_STALE_S
+            and now - self._lost_since >= LOST_CONFIRM_S
+        )
+
+    def estop_state(self) -> EStopState | None:
+        """The e-stop as latched on the bus right now (no wait for a callback), else the
+        last one handed to :meth:`on_estop`; None when nobody has published one."""
+        latched = self.bus.latest(topics.ESTOP)
+        return latched if isinstance(latched, EStopState) else self.estop
+
+    def readiness(self) -> Readiness:
+        e = self.estop_state()
+        return Readiness(
+            estop=bool(e and e.engaged),
+            estop_by=e.by if e else "",
+            battery=self.battery_fraction(),
+            lost=self.lost(),
+            battery_critical=self.battery_critical,
+            battery_low=self.battery_low,
+        )
+
+    def motion(self) -> NavStatus:
+        """What navigation is doing: the brain's own goal, else the navigator's state."""
+        if self.nav.navigating:
+            return self.nav
+        fb = self.nav_state
+        if fb is not None and fb.state is not NavState.IDLE:
+            return NavStatus.from_navigator(fb)
+        return self.nav
+
+    def status(self) -> str:
+        """Navigation and safety in one line, for the system prompt and the tools."""
+        return f"{self.motion().describe()}; {self.readiness().describe()}"
 
     # ------------------------------------------------------------ places
     async def places(self) -> Places:
@@ -127,19 +235,48 @@ class RobotLink:
 
     # ------------------------------------------------------------ navigation
     async def navigate(self, place: Place) -> Outcome:
-        """Start driving to ``place`` and return at once (the arrival comes as an event)."""
+        """Start driving to ``place`` and return once navigation took the goal (the
+        arrival comes as an event); refused when the robot can not drive now."""
+        refused = self.readiness().refuse_drive(place.name)
+        if refused is not None:
+            return Outcome(False, refused[1], refused=refused[0])
         if not self.bus.actions.has(topics.NAVIGATE_TO):
-            return Outcome(False, "navigation is not running right now")
+            return Outcome(False, NAV_DOWN_LINE, refused=Refusal.NAVIGATION)
         handle = await self.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=place.name))
+        turned_down = await self._turned_down(handle)
+        if turned_down:
+            return Outcome(False, turned_down, refused=Refusal.NAVIGATION)
         self._track(handle, place.name, touring=False)
         return Outcome(True, data={"place": place.name, "status": "navigating"})
 
     async def tour(self, names: list[str]) -> Outcome:
+        refused = self.readiness().refuse_tour()
+        if refused is not None:
+            return Outcome(False, refused[1], refused=refused[0])
         if not self.bus.actions.has(topics.TOUR):
-            return Outcome(False, "the tour guide part of navigation is not running right now")
+            return Outcome(False, TOUR_DOWN_LINE, refused=Refusal.NAVIGATION)
         handle = await self.bus.actions.send_goal(topics.TOUR, TourGoal(places=tuple(names)))
+        turned_down = await self._turned_down(handle)
+        if turned_down:
+            return Outcome(False, turned_down, refused=Refusal.NAVIGATION)
         self._track(handle, names[0], touring=True)
         return Outcome(True, data={"places": names, "status": "touring"})
+
+    async def _turned_down(self, handle: GoalHandle) -> str:
+        """Navigation's reason when it ended the goal at once ('' when it is running): the
+        visitor must not hear "follow me" for a goal that never started."""
+        deadline = asyncio.get_running_loop().time() + ACCEPT_WAIT_S
+        while not handle.done and handle.last_feedback is None:
+            if asyncio.get_running_loop().time() >= deadline:
+                return ""  # still working on it (waiting for a pose, planning): taken
+            await asyncio.sleep(ACCEPT_POLL_S)
+        if not handle.done:
+            return ""
+        result = await handle.result()
+        value = result.value
+        if result.ok and getattr(value, "succeeded", True):
+            return ""  # already there
+        return getattr(value, "reason", "") or result.message or "navigation did not take the goal"
 
     async def cancel(self) -> Outcome:
         stopped, was = False, self.nav.target
@@ -150,7 +287,8 @@ class RobotLink:
             except ServiceError as exc:
                 _log.warning("cancel service failed: %s", exc)
         if self._goal is not None and not self._goal.done:
-            await self._goal.cancel()
+            with contextlib.suppress(GoalTimeout):  # asked to stop; it winds down by itself
+                await self._goal.cancel()
             stopped = True
         self.nav = NavStatus()
         if not stopped:

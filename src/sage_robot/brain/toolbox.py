@@ -12,6 +12,8 @@ import socket
 from typing import Any
 
 from sage_robot.brain.matching import match_place, places_with_theme
+from sage_robot.brain.readiness import DOCK
+from sage_robot.brain.robot import Outcome
 from sage_robot.brain.tools import ToolContext, ToolResult, no_args, tool
 from sage_robot.core.config import read_secret
 from sage_robot.core.places import Place, Places
@@ -20,7 +22,6 @@ KB_PASSAGE_CHARS = 700  # passage text handed to the model per hit
 WEB_TIMEOUT_S = 10.0
 WEB_CONTENT_CHARS = 500  # per web result
 MAX_TOUR_STOPS = 8
-DOCK = "DOCKING_STATION"
 
 
 def _place_list(places: Places) -> list[dict[str, str]]:
@@ -35,6 +36,13 @@ async def _resolve(ctx: ToolContext, text: str) -> tuple[Place | None, Places]:
     return (found.place if found else None), places
 
 
+def _not_started(out: Outcome) -> ToolResult:
+    """A drive or tour that did not start: the reason, and that no goal is running, so a
+    model reading the result can not tell the visitor to follow it."""
+    refused = out.refused.value if out.refused is not None else "navigation"
+    return ToolResult.fail(out.reason, goal_started=False, refused=refused)
+
+
 def _unknown_place(text: str, places: Places) -> ToolResult:
     if not len(places):
         return ToolResult.fail(f"I know of no place called {text!r}: no places are loaded")
@@ -47,7 +55,8 @@ def _unknown_place(text: str, places: Places) -> ToolResult:
 @tool(
     "set_goal",
     "Start driving to a named place (non-blocking: returns at once; an arrival event follows). "
-    "One goal at a time. Accepts a place name, an alias or a description.",
+    "One goal at a time. Accepts a place name, an alias or a description. An error means "
+    "the robot is NOT moving (e-stop, battery, lost, navigation down): say why, never 'follow me'.",
     {
         "type": "object",
         "properties": {"location": {"type": "string", "minLength": 1, "description": "Place name"}},
@@ -61,8 +70,11 @@ async def set_goal(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
         return _unknown_place(args["location"], places)
     out = await ctx.robot.navigate(place)
     if not out.ok:
-        return ToolResult.fail(out.reason)
-    return ToolResult(True, {"status": "navigating", "place": place.name, "description": place.description})
+        return _not_started(out)
+    return ToolResult(
+        True,
+        {"status": "navigating", "goal_started": True, "place": place.name, "description": place.description},
+    )
 
 
 @tool("cancel_goal", "Stop the current navigation goal or tour.", no_args())
@@ -186,7 +198,7 @@ async def where_am_i(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
             "nearest_place": w.nearest_place,
             "distance_m": round(w.distance_m, 1),
             "localized": w.localized,
-            "navigation": ctx.robot.nav.describe(),
+            "navigation": ctx.robot.status(),
         },
     )
 
@@ -249,7 +261,8 @@ def tour_stops(places: Places, names: list[str] | None, theme: str | None) -> tu
 @tool(
     "start_tour",
     "Start a guided tour through several places (non-blocking). Give the places in order, or a "
-    "theme such as 'labs' or 'robotics', or neither for the standard tour.",
+    "theme such as 'labs' or 'robotics', or neither for the standard tour. An error means no "
+    "tour started: say why.",
     {
         "type": "object",
         "properties": {
@@ -268,5 +281,5 @@ async def start_tour(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
         return ToolResult.fail(f"no place fits the theme {args.get('theme')!r}", places=_place_list(places))
     out = await ctx.robot.tour([p.name for p in stops])
     if not out.ok:
-        return ToolResult.fail(out.reason)
-    return ToolResult(True, {"status": "touring", "stops": [p.name for p in stops]})
+        return _not_started(out)
+    return ToolResult(True, {"status": "touring", "goal_started": True, "stops": [p.name for p in stops]})

@@ -34,7 +34,9 @@ class ToolResult:
     error: str = ""
 
     def to_json(self) -> str:
-        return json.dumps(self.data if self.ok else {"error": self.error}, default=str)
+        """What the model reads: the data, or the error with any data that goes with it
+        (a refused drive says ``goal_started: false``)."""
+        return json.dumps(self.data if self.ok else {"error": self.error, **self.data}, default=str)
 
     @classmethod
     def fail(cls, error: str, **data: Any) -> ToolResult:

@@ -15,6 +15,7 @@ BENCHMARKS: dict[str, str] = {
     "brain": "sage_robot.bench.brain",
     "voice": "sage_robot.bench.voice",
     "web": "sage_robot.bench.web",
+    "safety": "sage_robot.bench.safety",
     "slam": "sage_robot.bench.slam",
     "nav": "sage_robot.bench.nav",
     "localization": "sage_robot.bench.localization",

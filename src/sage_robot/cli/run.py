@@ -12,10 +12,13 @@ import argparse
 import asyncio
 import importlib
 import json
+import os
+import sys
 import time
 from typing import Any
 
 from sage_robot.app.runtime import make_context, run_launcher, specs_for
+from sage_robot.app.supervisor import SUPERVISED_ENV, supervise
 from sage_robot.core.config import Settings, load_profile
 from sage_robot.core.errors import ConfigError
 
@@ -39,6 +42,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--mode", default="tour", choices=["tour", "slam"], help="what the robot does")
     p.add_argument(
         "--imu", action="store_true", help="publish /imu/data and fuse it (the seed's *_with_imu.sh scripts)"
+    )
+    p.add_argument(
+        "--no-supervisor",
+        action="store_true",
+        help="run without the parent process that stops the motors when SAGE dies or freezes "
+        "(only where something else does that job, e.g. systemd's ExecStopPost)",
     )
     p.set_defaults(func=run_up)
 
@@ -170,6 +179,10 @@ def _print_summary(summary: dict[str, Any], as_json: bool) -> None:
 def run_up(args: argparse.Namespace) -> int:
     imu = {"mcu": {"imu_enabled": True}, "nav": {"use_ekf": True}} if args.imu else None
     settings = load_profile(args.profile, imu)
+    if not args.no_supervisor and not os.environ.get(SUPERVISED_ENV):
+        # This process becomes the supervisor; the robot runs in a child that it watches.
+        child = [sys.executable, "-m", "sage_robot.cli.main", *sys.argv[1:]]
+        return supervise(child, settings.mcu.port, settings.mcu.baud)
     ctx = make_context(settings, simulated=False)
     asyncio.run(run_launcher(ctx, specs_for(args.mode)))
     return 0

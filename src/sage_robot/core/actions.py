@@ -244,7 +244,7 @@ class ActionServer:
         if pending:
             _, still = await asyncio.wait(pending, timeout=PREEMPT_WAIT_S)
             if still:
-                _log.error("action %s: the previous goal ignored its cancel for %s s", self.name, PREEMPT_WAIT_S)
+                _log.error("action %s: the previous goal ignored its cancel", self.name)
                 why = f"the previous {self.name} goal did not stop within {PREEMPT_WAIT_S:g} s"
                 self._end(handle, ActionResult(GoalStatus.ABORTED, None, why))
                 return False
@@ -286,10 +286,12 @@ class ActionRegistry:
         server = self._servers[name] = ActionServer(name, handler, policy, max_queue)
         return server
 
-    def unserve(self, name: str) -> None:
+    def unserve(self, name: str) -> ActionServer | None:
+        """Stop serving ``name`` (its goals end, cancelled); the server that was removed."""
         server = self._servers.pop(name, None)
         if server is not None:
             server.stop_all()
+        return server
 
     def has(self, name: str) -> bool:
         return name in self._servers

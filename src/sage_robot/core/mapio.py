@@ -1,14 +1,20 @@
 """ROS map_server maps: read and write YAML + image (PGM, PNG), and cell ↔ world transforms.
 
-Conventions (as map_server / Nav2 ``map_io``):
+Conventions (as Nav2's ``nav2_map_server/src/map_io.cpp``):
 
 - The image's top row is the map's far (+y) edge; :class:`OccupancyGrid` stores
   ``data[row, col]`` with row 0 at the *origin* (bottom), so rows are flipped on read.
 - ``origin: [x, y, yaw]`` is the pose of the lower-left pixel's corner in the map frame.
-- With ``negate: 0`` a pixel v has occupancy p = (255 - v) / 255 (``negate: 1``: v / 255).
-  ``trinary``: p > occupied_thresh → 100, p < free_thresh → 0, else -1 (unknown).
-  ``scale``: as trinary at the ends, in between 99·(p - free)/(occ - free); a transparent
-  pixel is unknown. ``raw``: the pixel value itself (0..100), anything else unknown.
+- A pixel's shade s is the mean of its colour channels / 255 (a grey image: its value;
+  16-bit images / 65535); in ``trinary`` mode an image with alpha averages the alpha in
+  too, as map_server does. Occupancy p = 1 - s (``negate: 1``: p = s).
+- ``trinary``: p > occupied_thresh → 100, p < free_thresh → 0, else -1 (unknown).
+  ``scale``: a pixel that is not opaque is unknown; else as trinary at the ends and
+  rint(100·(p - free)/(occ - free)) in between. ``raw``: round(255·s) when 0..100, else
+  unknown (``negate`` does not apply).
+- Unknown stays unknown: map_saver writes unknown as 205 (p = 50/255 ≈ 0.196) and free as
+  254, so a map needs ``free_thresh`` at most 0.196 (map_saver's own YAML says 0.196;
+  the seed's robot uses 0.1). With Nav2's default 0.25 a grey pixel loads as *free*.
 """
 
 from __future__ import annotations
@@ -29,8 +35,12 @@ FREE, OCCUPIED, UNKNOWN = 0, 100, -1
 # What map_saver writes for each class in trinary mode.
 PIXEL_FREE, PIXEL_OCCUPIED, PIXEL_UNKNOWN = 254, 0, 205
 DEFAULT_OCCUPIED_THRESH = 0.65
-DEFAULT_FREE_THRESH = 0.25  # the seed's robot edits this to 0.1 after SLAM
+# map_saver's free_thresh: the unknown grey (205, p = 0.196078) is not < 0.196, so it stays
+# unknown. Written by write_map and assumed when a YAML leaves the key out. (The seed's
+# robot edits it to 0.1 after SLAM; Nav2's saver writes 0.25, which loads grey as free.)
+DEFAULT_FREE_THRESH = 0.196
 MODES = ("trinary", "scale", "raw")
+SIXTEEN_BIT_MODES = ("I", "I;16", "I;16B", "I;16L")  # Pillow's modes of a 16-bit grey PGM/PNG
 SAVER_FREE_MAX = 25  # map_saver's default free threshold, on the 0..100 cell scale
 SAVER_OCCUPIED_MIN = 65  # map_saver's default occupied threshold, on the 0..100 cell scale
 
@@ -88,23 +98,45 @@ def _meta_from_yaml(path: Path) -> MapMeta:
     return MapMeta(image, resolution, origin, bool(int(data.get("negate", 0))), occ, free, mode)  # type: ignore[arg-type]
 
 
-def _classify(pixels: np.ndarray, alpha: np.ndarray | None, meta: MapMeta) -> np.ndarray:
+def _classify(shade: np.ndarray, alpha: np.ndarray | None, meta: MapMeta) -> np.ndarray:
+    """Cells from shades 0..1 (and alpha 0..1, 1 = opaque), exactly as map_io.cpp."""
     if meta.mode == "raw":
-        out = np.where(pixels <= OCCUPIED, pixels, UNKNOWN).astype(np.int8)
-    else:
-        p = pixels.astype(np.float64) / 255.0
-        if not meta.negate:
-            p = 1.0 - p
-        out = np.full(pixels.shape, UNKNOWN, dtype=np.int8)
-        out[p > meta.occupied_thresh] = OCCUPIED
-        out[p < meta.free_thresh] = FREE
-        if meta.mode == "scale":
-            mid = (p >= meta.free_thresh) & (p <= meta.occupied_thresh)
-            scaled = 99.0 * (p - meta.free_thresh) / (meta.occupied_thresh - meta.free_thresh)
-            out[mid] = np.rint(scaled[mid]).astype(np.int8)
-    if alpha is not None and meta.mode == "scale":
-        out[alpha == 0] = UNKNOWN
+        value = np.rint(shade * 255.0)
+        return np.where(value <= OCCUPIED, value, UNKNOWN).astype(np.int8)
+    occ = shade if meta.negate else 1.0 - shade
+    out = np.full(shade.shape, UNKNOWN, dtype=np.int8)
+    out[meta.occupied_thresh < occ] = OCCUPIED
+    out[occ < meta.free_thresh] = FREE
+    if meta.mode == "scale":
+        mid = (occ >= meta.free_thresh) & (occ <= meta.occupied_thresh)
+        scaled = 100.0 * (occ - meta.free_thresh) / (meta.occupied_thresh - meta.free_thresh)
+        out[mid] = np.rint(scaled[mid]).astype(np.int8)
+        if alpha is not None:
+            out[alpha < 1.0] = UNKNOWN
     return out
+
+
+def _shades(img: Image.Image, mode: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """(shade, alpha), both 0..1: the mean of the colour channels, and in ``trinary`` mode
+    the alpha averaged in as one more channel (map_io.cpp keeps that old behaviour).
+    Computed as map_io.cpp does, (sum / channels) / max, so ties at a threshold agree."""
+    if img.mode in SIXTEEN_BIT_MODES:
+        return np.asarray(img, dtype=np.float64) / 65535.0, None
+    if img.mode in ("L", "LA", "RGB", "RGBA"):
+        rgba = img
+    else:  # palette, bilevel, CMYK...: as the colours they stand for
+        transparent = "A" in img.getbands() or "transparency" in img.info
+        rgba = img.convert("RGBA" if transparent else "RGB")
+    arr = np.asarray(rgba, dtype=np.float64)
+    if arr.ndim == 2:  # L
+        return arr / 255.0, None
+    has_alpha = rgba.mode in ("LA", "RGBA")
+    colour = arr[..., :-1] if has_alpha else arr
+    colour_sum = colour.sum(axis=-1) * (3 if colour.shape[-1] == 1 else 1)  # LA: grey counts as R, G, B
+    alpha = arr[..., -1] if has_alpha else None
+    if alpha is not None and mode == "trinary":
+        return (colour_sum + alpha) / 4.0 / 255.0, alpha / 255.0
+    return colour_sum / 3.0 / 255.0, None if alpha is None else alpha / 255.0
 
 
 def read_map(yaml_path: str | Path) -> OccupancyGrid:
@@ -113,16 +145,12 @@ def read_map(yaml_path: str | Path) -> OccupancyGrid:
     meta = _meta_from_yaml(path)
     try:
         with Image.open(meta.image) as img:
-            alpha = np.asarray(img.getchannel("A")) if img.mode in ("RGBA", "LA") else None
-            gray = img.convert("L") if img.mode not in ("L", "I", "I;16") else img
-            pixels = np.asarray(gray)
+            shade, alpha = _shades(img, meta.mode)
     except FileNotFoundError:
         raise ConfigError(f"{path}: image {meta.image} not found") from None
     except (UnidentifiedImageError, OSError) as exc:
         raise ConfigError(f"{path}: cannot read image {meta.image}: {exc}") from None
-    if pixels.dtype != np.uint8:
-        pixels = np.clip(pixels, 0, 255).astype(np.uint8)
-    data = _classify(pixels, alpha, meta)[::-1].copy()  # image top row = far edge
+    data = _classify(shade, alpha, meta)[::-1].copy()  # image top row = far edge
     x, y, yaw = meta.origin
     return OccupancyGrid(0.0, "map", meta.resolution, Pose2D(x, y, yaw), data)
 

@@ -1,21 +1,29 @@
 """The firmware model behind a pseudo-terminal, so the real serial bridge talks to it
 unchanged, and McuSimNode, which runs it on the simulator's clock.
 
-``PtyMcu.port_name`` is a stable symlink in a private temp directory that points at the
-pty's slave (like /dev/serial/by-id on the robot): :meth:`PtyMcu.unplug` closes the pty
-and removes the link, as a USB unplug removes /dev/ttyACM0; :meth:`PtyMcu.replug`
-opens a new pty and puts the link back, so a bridge configured with the link finds the
-device again.
+``PtyMcu.port_name`` is a stable symlink that points at the pty's slave (like
+/dev/serial/by-id on the robot): :meth:`PtyMcu.unplug` closes the pty and removes the
+link, as a USB unplug removes /dev/ttyACM0; :meth:`PtyMcu.replug` opens a new pty and puts
+the link back, so a bridge configured with the link finds the device again.
+
+The link lives in ``mcu-<pid>-<random>/`` under a private per-user directory
+(``$XDG_RUNTIME_DIR/sage``, else ``<tmp>/sage-<uid>``, mode 0700). :meth:`PtyMcu.close`
+removes it; a process killed with SIGKILL cannot, so every new :class:`PtyMcu` first
+removes the directories of this user whose owner PID is no longer alive.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
+import re
 import shutil
+import stat
 import tempfile
 import termios
 import tty
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -31,14 +39,84 @@ LINK_NAME = "ttySIM0"
 PORT_RESOURCE = "mcu_port"  # ctx.resources key the serial bridge reads
 WORLD_RESOURCE = "sim_world"  # ctx.resources key of the simulated world, when there is one
 MCU_SIM_RESOURCE = "mcu_sim"  # ctx.resources key of this node (tests, the world)
+RUNTIME_SUBDIR = "sage"  # under $XDG_RUNTIME_DIR
+LINK_DIR_PREFIX = "mcu-"  # mcu-<owner pid>-<random>: one per PtyMcu
+_LINK_DIR = re.compile(rf"^{LINK_DIR_PREFIX}(\d+)-")
+PRIVATE_MODE = 0o700
+
+_log = logging.getLogger("sage.sim.mcu_pty")
+
+
+def runtime_dir() -> Path | None:
+    """This user's private directory for pty links, created 0700 when missing; None when
+    no safe one can be had (it exists but is not a directory of ours that only we can use)."""
+    xdg = os.environ.get("XDG_RUNTIME_DIR", "")
+    base = Path(xdg) / RUNTIME_SUBDIR if xdg and os.path.isdir(xdg) else (
+        Path(tempfile.gettempdir()) / f"sage-{os.getuid()}"
+    )
+    try:
+        base.mkdir(mode=PRIVATE_MODE, exist_ok=True)
+        st = os.lstat(base)
+    except OSError as exc:
+        _log.warning("no runtime directory %s: %s", base, exc)
+        return None
+    if not stat.S_ISDIR(st.st_mode) or st.st_uid != os.getuid() or st.st_mode & 0o077:
+        _log.warning("runtime directory %s is not a private directory of this user; not used", base)
+        return None
+    return base
+
+
+def pid_alive(pid: int) -> bool:
+    """True when a process with this PID exists (ours or another user's)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists, it is someone else's
+        return True
+    return True
+
+
+def remove_stale_links(base: Path) -> list[Path]:
+    """Remove ``mcu-<pid>-*`` directories in ``base`` that belong to this user and whose
+    PID is not alive (left by a process killed with SIGKILL). Returns what was removed."""
+    removed: list[Path] = []
+    try:
+        entries = list(os.scandir(base))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _LINK_DIR.match(entry.name)
+        if m is None or not entry.is_dir(follow_symlinks=False):
+            continue
+        try:
+            if entry.stat(follow_symlinks=False).st_uid != os.getuid():
+                continue
+        except OSError:  # gone in between
+            continue
+        if pid_alive(int(m.group(1))):
+            continue
+        shutil.rmtree(entry.path, ignore_errors=True)  # holds only our symlink; links are not followed
+        removed.append(Path(entry.path))
+    if removed:
+        _log.info("removed %d stale pty link dir(s) in %s", len(removed), base)
+    return removed
 
 
 class PtyMcu:
-    """A pty pair with the firmware model on the master side."""
+    """A pty pair with the firmware model on the master side. ``base``: where the link's
+    directory goes (default :func:`runtime_dir`; stale ones there are removed first)."""
 
-    def __init__(self, firmware: FirmwareModel) -> None:
+    def __init__(self, firmware: FirmwareModel, base: Path | None = None) -> None:
         self.firmware = firmware
-        self._dir = tempfile.mkdtemp(prefix="sage-mcu-")
+        base = base if base is not None else runtime_dir()
+        if base is not None:
+            remove_stale_links(base)
+            self._dir = tempfile.mkdtemp(prefix=f"{LINK_DIR_PREFIX}{os.getpid()}-", dir=base)
+        else:  # no private runtime dir: a fresh private temp dir (no sweep possible)
+            self._dir = tempfile.mkdtemp(prefix=f"sage-{LINK_DIR_PREFIX}{os.getpid()}-")
         self.port_name = os.path.join(self._dir, LINK_NAME)
         self.master_fd = -1
         self._slave_fd = -1

@@ -25,6 +25,7 @@ router = APIRouter()
 INITIAL_POSE_COV = (0.25, 0.0, 0.0, 0.0, 0.25, 0.0, 0.0, 0.0, 0.07)  # x,y m², theta rad² (RViz's)
 PLACES_TIMEOUT_S = 2.0
 MAX_COORD_M = 10_000.0  # a pose farther than this from the origin is a typo
+MAX_SHOWN_CHARS = 40  # of a bad value quoted back in an error
 MJPEG_BOUNDARY = "sageframe"
 
 _log = get_logger("web")
@@ -32,11 +33,16 @@ _log = get_logger("web")
 
 def _number(body: dict[str, Any], key: str, default: float | None = None) -> float:
     value = body.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise HTTPException(status_code=422, detail=f"{key}: expected a finite number, got {value!r}")
-    if abs(value) > MAX_COORD_M:
+    try:
+        number = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else None
+    except OverflowError:  # an integer past float range (json_body refuses these already)
+        number = None
+    if number is None or not math.isfinite(number):
+        shown = repr(value) if len(repr(value)) <= MAX_SHOWN_CHARS else f"{repr(value)[:MAX_SHOWN_CHARS]}..."
+        raise HTTPException(status_code=422, detail=f"{key}: expected a finite number, got {shown}")
+    if abs(number) > MAX_COORD_M:
         raise HTTPException(status_code=422, detail=f"{key}: {value} is out of range")
-    return float(value)
+    return number
 
 
 def _pose(body: dict[str, Any]) -> Pose2D:

@@ -1,5 +1,8 @@
 """The FastAPI application: pages, login, and the routers of :mod:`api`, :mod:`sockets`, :mod:`talk`.
 
+Every request passes :class:`~sage_robot.web.guard.RequestGuard` first (Origin and
+Content-Type of state-changing requests, body limits on the bytes received).
+
 Everything the handlers need hangs on ``app.state``: ``web`` (:class:`WebState`).
 """
 
@@ -7,7 +10,6 @@ from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
-from typing import Any
 from urllib.parse import quote
 
 from fastapi import FastAPI, HTTPException, Request
@@ -19,6 +21,7 @@ from sage_robot.core.log import get_logger
 from sage_robot.web import admin, api, slam_api, sockets, talk
 from sage_robot.web.auth import SESSION_COOKIE
 from sage_robot.web.common import WebState, client_key, is_operator, json_body, state_of
+from sage_robot.web.guard import RequestGuard
 
 UPLOAD_SLACK_BYTES = 64 * 1024  # multipart headers around an upload
 KB_UPLOAD_LIMIT_BYTES = 200 * 1024 * 1024  # several documents at once (the KB checks each file)
@@ -26,6 +29,13 @@ PUBLIC_PAGES = {"/": "index.html", "/face": "face.html", "/talk": "talk.html", "
 OPERATOR_PAGES = {"/teleop": "teleop.html", "/admin": "admin.html"}
 
 _log = get_logger("web")
+
+
+def body_limit(path: str) -> int:
+    """Bytes a request body may have: a KB upload batch, else one voice recording."""
+    if path.startswith("/api/kb/"):
+        return KB_UPLOAD_LIMIT_BYTES
+    return talk.MAX_UPLOAD_BYTES + UPLOAD_SLACK_BYTES
 
 
 def static_dir() -> Path:
@@ -36,17 +46,12 @@ def create_app(state: WebState) -> FastAPI:
     app = FastAPI(title="SAGE", docs_url=None, redoc_url=None, openapi_url=None)
     app.state.web = state
 
-    @app.middleware("http")
-    async def limit_body(request: Request, call_next: Any) -> Response:
-        """Refuse oversized bodies before they are read (uploads are spooled to disk)."""
-        length = request.headers.get("content-length", "")
-        limit = talk.MAX_UPLOAD_BYTES + UPLOAD_SLACK_BYTES
-        if request.url.path.startswith("/api/kb/"):
-            limit = KB_UPLOAD_LIMIT_BYTES
-        if length.isdigit() and int(length) > limit:
-            return JSONResponse({"error": f"request body over {limit} bytes"}, status_code=413)
-        return await call_next(request)
-
+    app.add_middleware(
+        RequestGuard,
+        routes=lambda: app.router.routes,
+        allowed_origins=lambda: state.node.settings.web.allowed_origins,
+        body_limit=body_limit,
+    )
     _add_error_handlers(app)
     _add_pages(app)
     app.include_router(api.router)

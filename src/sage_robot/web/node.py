@@ -64,6 +64,7 @@ class WebNode(Node):
             lifespan="off",
             ws_max_size=WS_MAX_MESSAGE_BYTES,
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
+            **proxy_options(web.trusted_proxies),
         )
         self.server = _QuietServer(config)
         self._serve_task = self.spawn(self.server.serve(sockets=[self.sock]), "web.server")
@@ -76,6 +77,8 @@ class WebNode(Node):
         if task is not None and not task.done():
             with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
                 await asyncio.wait_for(asyncio.shield(task), SHUTDOWN_GRACE_S + 1.0)
+        for listener in getattr(server, "servers", []):  # a serve task that died (crash, cancel)
+            listener.close()  # left its listener in the loop; a new socket could reuse its fd
         hub = getattr(self, "hub", None)
         if hub is not None:
             hub.stop()
@@ -96,6 +99,18 @@ class WebNode(Node):
             **(teleop.counts if teleop else {}),
             "estop": bool(hub.estop) if hub else False,
         }
+
+
+def proxy_options(trusted_proxies: tuple[str, ...]) -> dict[str, Any]:
+    """uvicorn settings that believe ``X-Forwarded-For``/``-Proto`` only from ``trusted_proxies``.
+
+    uvicorn's own default believes them from 127.0.0.1, which lets anything on the robot (or
+    a local proxy that passes the header on) pick its client address, e.g. to dodge the
+    per-address login limit. With no trusted proxies the headers are ignored altogether.
+    """
+    if not trusted_proxies:
+        return {"proxy_headers": False, "forwarded_allow_ips": []}
+    return {"proxy_headers": True, "forwarded_allow_ips": list(trusted_proxies)}
 
 
 def _bind(host: str, port: int) -> socket.socket:

@@ -24,7 +24,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
 from sage_robot.core.log import get_logger
 from sage_robot.web.auth import origin_allowed
-from sage_robot.web.common import is_operator, state_of
+from sage_robot.web.common import is_operator, nonfinite_field, state_of
 from sage_robot.web.teleop import BadMessage, parse_control
 
 router = APIRouter()
@@ -63,8 +63,13 @@ def _decode(text: str | None) -> dict[str, Any]:
         msg = json.loads(text)
     except json.JSONDecodeError as exc:
         raise BadMessage(f"not valid JSON: {exc.msg}") from None
+    except (ValueError, RecursionError) as exc:  # an integer of over 4300 digits, deep nesting
+        raise BadMessage(f"not usable JSON: {exc}") from None
     if not isinstance(msg, dict) or not isinstance(msg.get("type"), str):
         raise BadMessage('expected a JSON object with a "type"')
+    bad = nonfinite_field(msg)
+    if bad is not None:
+        raise BadMessage(f"{bad}: expected a finite number")
     return msg
 
 
@@ -102,8 +107,8 @@ async def _serve(ws: WebSocket, channels: tuple[str, ...], handle: Any, camera: 
             try:
                 msg = _decode(raw.get("text"))
                 reply = await handle(msg)
-            except BadMessage as exc:
-                reply = {"type": "error", "error": str(exc)}
+            except (ValueError, OverflowError) as exc:  # BadMessage is a ValueError
+                reply = {"type": "error", "error": _bad_message_text(exc)}
             if reply is not None:
                 await ws.send_json(reply)
     except (WebSocketDisconnect, RuntimeError):
@@ -112,6 +117,16 @@ async def _serve(ws: WebSocket, channels: tuple[str, ...], handle: Any, camera: 
         pump.cancel()
         with contextlib.suppress(asyncio.CancelledError, Exception):
             await pump
+
+
+def _bad_message_text(exc: Exception) -> str:
+    """What the client is told: a BadMessage's own text, else what kind of value failed."""
+    if isinstance(exc, BadMessage):
+        return str(exc)
+    _log.warning("websocket message refused", error=f"{type(exc).__name__}: {exc}")
+    if isinstance(exc, OverflowError):
+        return "a number is out of range"
+    return f"bad message: {exc}"
 
 
 async def _common(msg: dict[str, Any]) -> dict[str, Any] | None:

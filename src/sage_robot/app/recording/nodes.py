@@ -7,7 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from sage_robot.app.recording import ros2
+from sage_robot.app.recording.gate import FoxgloveGate, foxglove_token, is_loopback_host
 from sage_robot.app.recording.mcap_io import McapRecorder, _ros_name, read_mcap
+from sage_robot.core.errors import ConfigError
 from sage_robot.core.msgs import OccupancyGrid
 from sage_robot.core.node import Node
 
@@ -80,7 +82,11 @@ class ReplayNode(Node):
 
 
 class FoxgloveNode(Node):
-    """A Foxglove WebSocket server publishing every topic live, as ROS 2 CDR messages."""
+    """A Foxglove WebSocket server publishing every topic live, as ROS 2 CDR messages.
+
+    Clients reach it through :class:`~sage_robot.app.recording.gate.FoxgloveGate` (Origin
+    check; the Foxglove token where ``ops.foxglove_host`` is not loopback).
+    """
 
     name = "foxglove"
 
@@ -89,15 +95,34 @@ class FoxgloveNode(Node):
 
         self._fg = foxglove
         ops = self.settings.ops
-        self.server = foxglove.start_server(name="SAGE", host=ops.foxglove_host, port=ops.foxglove_port)
-        self.port = self.server.port
+        # The SDK's server has no login and no Origin check: loopback only, behind the gate.
+        self.server = foxglove.start_server(name="SAGE", host="127.0.0.1", port=0)
+        token = None
+        if not is_loopback_host(ops.foxglove_host):
+            from sage_robot.web.auth import operator_password
+
+            token = foxglove_token(operator_password(self.settings))
+        origins = (*self.settings.web.allowed_origins, *ops.foxglove_origins)
+        self.gate = FoxgloveGate(self.server.port, token, origins, self.log)
+        try:
+            self.port = await self.gate.start(ops.foxglove_host, ops.foxglove_port)
+        except OSError as exc:
+            self.server.stop()
+            raise ConfigError(
+                f"Foxglove: cannot listen on {ops.foxglove_host}:{ops.foxglove_port} ({exc.strerror}); "
+                "stop the other program or set ops.foxglove_port"
+            ) from None
         self.ctx.resources["foxglove_port"] = self.port
         self._channels: dict[str, tuple[Any, Any]] = {}
         self._last_map = -1e9
         self.sent = 0
         self.errors = 0
         self._remove_tap = self.bus.add_tap(self._tap)
-        self.log.info("Foxglove live view", url=f"ws://{ops.foxglove_host}:{self.port}")
+        self.log.info(
+            "Foxglove live view",
+            url=f"ws://{ops.foxglove_host}:{self.port}",
+            token="required (python -m sage_robot.app.recording.gate)" if token else "not needed (loopback)",
+        )
 
     def _channel(self, topic: str, ros_type: str) -> tuple[Any, Any]:
         found = self._channels.get(topic)
@@ -131,7 +156,11 @@ class FoxgloveNode(Node):
 
     async def teardown(self) -> None:
         self._remove_tap()
+        await self.gate.stop()
         self.server.stop()
 
     def stats(self) -> dict[str, Any]:
-        return {"port": self.port, "channels": len(self._channels), "sent": self.sent, "errors": self.errors}
+        return {
+            "port": self.port, "channels": len(self._channels), "sent": self.sent, "errors": self.errors,
+            **self.gate.counts,
+        }  # fmt: skip

@@ -177,15 +177,35 @@ class KbSettings(Section):
     embedder: str = Field("all-MiniLM-L6-v2", description="Embedding model name.")
     top_k: int = Field(5, gt=0, le=50, description="Passages returned by default.")
     load_corpus: bool = Field(True, description="Ingest the shipped corpus into an empty store.")
+    max_document_mb: float = Field(
+        20.0, gt=0, description="Largest document file accepted (MB = 2**20 bytes); larger ones fail."
+    )
+    max_inflated_mb: float = Field(
+        50.0, gt=0, description="DOCX (zip): most its members may unpack to together (MB); else a zip bomb."
+    )
+    max_zip_members: int = Field(2000, gt=0, description="DOCX (zip): most files inside the package.")
+    max_zip_ratio: float = Field(
+        100.0, gt=1, description="DOCX (zip): highest unpacked/packed size of a member over 1 MB."
+    )
+    max_chars: int = Field(
+        2_000_000, gt=0, description="Most characters of text one document may give (refused, not cut)."
+    )
 
 
 class WebSettings(Section):
     host: str = Field("0.0.0.0", description="Address the web server listens on.")
     port: int = Field(8000, ge=0, lt=65536, description="Port of every page and socket; 0 = any free.")
-    deadman_s: float = Field(0.5, gt=0, description="Teleop stops after this silence (s).")
-    allowed_origins: tuple[str, ...] = Field((), description="Extra WebSocket origins.")
+    deadman_s: float = Field(0.25, gt=0, description="Teleop stops after this silence (s): 2.5 page repeats.")
+    allowed_origins: tuple[str, ...] = Field(
+        (), description="Extra origins (scheme://host:port) for WebSockets and state-changing requests."
+    )
     camera_fps: float = Field(15.0, gt=0, le=60, description="Camera frames/s sent to a page, at most.")
     talk_per_min: float = Field(20.0, gt=0, description="Visitor questions per minute per address.")
+    trusted_proxies: tuple[str, ...] = Field(
+        (),
+        description="Addresses (or CIDR networks) of reverse proxies whose X-Forwarded-For / "
+        "X-Forwarded-Proto are believed; empty = none (the socket's peer address counts).",
+    )
 
 
 class EmailSettings(Section):

@@ -8,8 +8,17 @@ from sage_robot.core.config.base import Section
 
 
 class OpsSettings(Section):
-    foxglove_host: str = Field("0.0.0.0", description="Foxglove WebSocket server address.")
+    foxglove_host: str = Field(
+        "127.0.0.1",
+        description="Foxglove WebSocket server address. Loopback by default; any other address "
+        "requires the Foxglove token (docs/security.md).",
+    )
     foxglove_port: int = Field(8765, ge=0, lt=65536, description="Foxglove port (0 = any free port).")
+    foxglove_origins: tuple[str, ...] = Field(
+        ("https://app.foxglove.dev",),
+        description="Browser origins allowed to open the Foxglove view besides loopback pages and "
+        "web.allowed_origins.",
+    )
     foxglove_map_period_s: float = Field(
         5.0, gt=0, description="Send /map to Foxglove at most this often (s)."
     )

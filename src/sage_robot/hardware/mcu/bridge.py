@@ -11,6 +11,9 @@
   load sag does not swing the percentage) and
   (``mcu.imu_enabled``) IMU -> ``/imu/data`` after the start-up bias calibration,
   publishing through ``bus.publish_threadsafe``.
+- Run by the supervisor (:mod:`sage_robot.app.supervisor`, ``sage up``'s default), it
+  writes a heartbeat byte every ``HEARTBEAT_PERIOD_S`` to the pipe the supervisor gave it;
+  when the heartbeat stops (frozen process, stalled loop) the supervisor stops the motors.
 - The port is ``ctx.resources["mcu_port"]`` when a simulator put one there, else
   ``mcu.port`` ('auto' finds /dev/ttyACM*). Losing it (USB unplug) logs one line,
   publishes an ERROR DiagnosticStatus on ``/mcu/status`` while down and reopens every
@@ -19,6 +22,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import threading
 from collections import Counter
 from typing import Any
@@ -43,7 +48,7 @@ from sage_robot.hardware.mcu.convert import (
     clamp_command,
     odometry_from,
 )
-from sage_robot.hardware.mcu.port import find_port, open_port
+from sage_robot.hardware.mcu.port import HEARTBEAT_PERIOD_S, find_port, heartbeat_fd, open_port
 
 PORT_RESOURCE = "mcu_port"  # ctx.resources key: a port path set by the simulator
 CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
@@ -89,6 +94,10 @@ class SerialBridgeNode(Node):
             self.every(CMD_TIMEOUT_CHECK_S, self._check_timeout, "serial_bridge.cmd_timeout")
         self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
         self.spawn(self._link_loop(), "serial_bridge.link")
+        self._beat_fd = heartbeat_fd()
+        if self._beat_fd is not None:  # run by the supervisor: tell it this bridge is alive
+            os.set_blocking(self._beat_fd, False)
+            self.every(HEARTBEAT_PERIOD_S, self._beat, "serial_bridge.heartbeat")
 
     async def teardown(self) -> None:
         if getattr(self, "_port", None) is None:
@@ -119,6 +128,12 @@ class SerialBridgeNode(Node):
         self.command = (0.0, 0.0)
         self._write(0.0, 0.0)
         return True
+
+    def _beat(self) -> None:
+        assert self._beat_fd is not None
+        # A full pipe is a live parent that is behind; a gone one can't hear.
+        with contextlib.suppress(BlockingIOError, BrokenPipeError):
+            os.write(self._beat_fd, b".")
 
     def _write(self, v: float, w: float) -> None:
         port = self._port

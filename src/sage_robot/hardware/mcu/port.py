@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+import os
 from typing import Any
 
 from sage_robot.core.errors import DeviceNotConnectedError
@@ -11,6 +12,14 @@ AUTO = "auto"
 AUTO_PATTERN = "/dev/ttyACM*"  # the STM32's USB CDC device
 READ_TIMEOUT_S = 0.05  # RX thread wakes at least this often (to notice a stop request)
 WRITE_TIMEOUT_S = 0.2  # a stuck port must not stall the event loop longer than this
+HEARTBEAT_FD_ENV = "SAGE_HEARTBEAT_FD"  # set by the supervisor (app.supervisor): a pipe to beat on
+HEARTBEAT_PERIOD_S = 0.05  # the bridge beats this often; the supervisor waits 0.2 s (s)
+
+
+def heartbeat_fd() -> int | None:
+    """In a process run by the supervisor: the pipe to write heartbeats to, else None."""
+    raw = os.environ.get(HEARTBEAT_FD_ENV, "")
+    return int(raw) if raw.isdigit() else None
 
 
 def find_port(configured: str, pattern: str = AUTO_PATTERN) -> str:

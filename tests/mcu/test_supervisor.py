@@ -1,0 +1,112 @@
+"""The supervisor has the port's last word: SAGE's process killed (SIGKILL) or frozen
+(SIGSTOP) mid-drive, and the firmware model behind a real pty still receives a stop.
+
+The firmware model is pumped on the wall clock in this process; SAGE's side (the real
+serial bridge and a 0.5 m/s publisher) runs in a child process under
+``python -m sage_robot.app.supervisor``. Bounds are generous (a loaded CI machine); the
+numbers themselves come from ``sage bench safety``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from sage_robot.bench.safety import CHILD
+from sage_robot.sim.firmware import FirmwareModel
+from sage_robot.sim.mcu_pty import PtyMcu
+
+PUMP_S = 0.005  # the firmware model's step here (s)
+DRIVING_WITHIN_S = 20.0  # the child must be driving within this (wall s)
+STOP_WITHIN_S = 2.0  # and the firmware must have a stop this soon after the fault (wall s)
+SPEED_MPS = 0.5
+
+
+class Firmware(threading.Thread):
+    """The firmware model behind a pty, pumped in real time; remembers every command."""
+
+    def __init__(self) -> None:
+        super().__init__(daemon=True, name="test-firmware")
+        self.model = FirmwareModel()
+        self.pty = PtyMcu(self.model)
+        self.done = threading.Event()
+        self.t0 = time.monotonic()
+
+    def run(self) -> None:
+        k = 0
+        while not self.done.is_set():
+            k += 1
+            self.pty.pump(k * PUMP_S)
+            time.sleep(max(0.0, self.t0 + k * PUMP_S - time.monotonic()))
+
+    def close(self) -> None:
+        self.done.set()
+        self.join(2.0)
+        self.pty.close()
+
+
+@pytest.fixture
+def firmware() -> Iterator[Firmware]:
+    fw = Firmware()
+    fw.start()
+    try:
+        yield fw
+    finally:
+        fw.close()
+
+
+def _wait(cond: object, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():  # type: ignore[operator]
+            return True
+        time.sleep(0.002)
+    return False
+
+
+def _start_supervised(port: str) -> tuple[subprocess.Popen[str], int]:
+    cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce", "--port", port, "--",
+           sys.executable, "-c", CHILD, port, str(SPEED_MPS)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    first = proc.stdout.readline()
+    assert first.startswith("child "), f"the supervisor announces its child, got {first!r}"
+    return proc, int(first.split()[1])
+
+
+@pytest.mark.parametrize("fault", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "frozen"])
+def test_the_supervisor_stops_the_motors_when_sage_dies_or_freezes(firmware: Firmware, fault: int) -> None:
+    proc, child = _start_supervised(firmware.pty.port_name)
+    try:
+        assert _wait(lambda: firmware.model.last_command[0] == pytest.approx(SPEED_MPS), DRIVING_WITHIN_S), \
+            "the supervised bridge drove"
+        time.sleep(0.3)  # a few more commands: it is a standing drive, not a start-up blip
+        t_fault = time.monotonic()
+        os.kill(child, fault)
+        assert _wait(lambda: firmware.model.last_command == (0.0, 0.0), STOP_WITHIN_S), \
+            "the firmware received a stop"
+        took = time.monotonic() - t_fault
+        assert took < STOP_WITHIN_S
+        if fault == signal.SIGKILL:
+            assert proc.wait(10.0) == 128 + signal.SIGKILL  # the supervisor reports how the child ended
+            assert proc.stderr is not None
+            assert "killed by signal 9" in proc.stderr.read()
+    finally:
+        for pid in (child, proc.pid):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        proc.wait(10.0)
+
+
+def test_without_a_command_the_supervisor_refuses_clearly() -> None:
+    out = subprocess.run([sys.executable, "-m", "sage_robot.app.supervisor", "--port", "/dev/null"],
+                         capture_output=True, text=True, timeout=30)
+    assert out.returncode == 2 and "give the command to run" in out.stderr
