@@ -16,6 +16,8 @@ serial bridge and web server (wall clock); an operator drives at ``--speed`` m/s
 - ``bridge_dead_in_process``: the serial bridge's tasks die with the port open inside a
   live process that has no supervisor: only the MCU's own watchdog is left (the documented
   firmware has one; firmware without a watchdog would drive on);
+- ``bridge_dead_supervised``: the same inside SAGE's process under the supervisor: the
+  bridge's heartbeat stops with it and the supervisor stops the motors;
 - ``process_frozen_supervised``: SAGE's process (bridge + a publisher) is frozen with
   SIGSTOP under the supervisor: the bridge's heartbeat stops and the supervisor stops the
   motors;
@@ -275,7 +277,7 @@ async def _navigator_silent(robot: RobotSide, speed: float) -> dict[str, Any]:
 
 
 CHILD = """
-import asyncio, sys, time
+import asyncio, signal, sys, time
 from sage_robot.core import topics
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import WallClock
@@ -290,6 +292,9 @@ async def main():
     ctx.resources[PORT_RESOURCE] = sys.argv[1]
     bridge = SerialBridgeNode(ctx)
     await bridge.setup()
+    # SIGUSR1: the bridge's tasks die inside a live process (the publisher goes on)
+    asyncio.get_running_loop().add_signal_handler(
+        signal.SIGUSR1, lambda: asyncio.ensure_future(bridge._close()))
     while True:
         ctx.bus.publish(topics.CMD_VEL, Twist(float(sys.argv[2]), 0.0))
         print(time.monotonic(), flush=True)
@@ -332,7 +337,7 @@ async def _process_fault(robot: RobotSide, speed: float, supervised: bool, sig: 
 
 
 CASES = ("socket_closed", "client_silent", "client_frozen", "estop", "navigator_silent", "web_crashed",
-         "bridge_dead_in_process", "process_frozen_supervised", "process_killed_supervised",
+         "bridge_dead_in_process", "bridge_dead_supervised", "process_frozen_supervised", "process_killed_supervised",
          "process_killed_unsupervised")
 
 
@@ -340,8 +345,9 @@ async def _one(case: str, robot: RobotSide, args: argparse.Namespace, clients: _
                password: str) -> dict[str, Any]:
     if case == "navigator_silent":
         return await _navigator_silent(robot, args.speed)
-    if case.startswith("process_"):
-        sig = signal.SIGSTOP if case.startswith("process_frozen") else signal.SIGKILL
+    if case.startswith("process_") or case == "bridge_dead_supervised":
+        sig = {"process_frozen": signal.SIGSTOP, "bridge_dead": signal.SIGUSR1}.get(
+            case.rsplit("_", 1)[0], signal.SIGKILL)
         return await _process_fault(robot, args.speed, case.endswith("_supervised"), sig)
     return await _teleop_case(case, robot, args.speed, clients, password)
 
