@@ -52,6 +52,7 @@ from sage_robot.hardware.mcu.port import HEARTBEAT_PERIOD_S, find_port, heartbea
 
 PORT_RESOURCE = "mcu_port"  # ctx.resources key: a port path set by the simulator
 CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
+TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
 LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
 STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
 RX_JOIN_TIMEOUT_S = 1.0  # the RX thread wakes every READ_TIMEOUT_S, so this is ample
@@ -84,6 +85,7 @@ class SerialBridgeNode(Node):
         self.battery_raw_v: float | None = None
         self.calibrator = ImuCalibrator(self.mcu.imu_calibration_s) if self.mcu.imu_enabled else None
         self._moved_logged_at: float | None = None
+        self._timeout_logged_at = -TIMEOUT_LOG_EVERY_S
         self.bus.declare(topics.ODOM, Odometry)
         self.bus.declare(topics.BATTERY, BatteryState)
         self.bus.declare(topics.IMU, Imu)
@@ -123,7 +125,11 @@ class SerialBridgeNode(Node):
         timeout = self.mcu.cmd_timeout_s
         if self.command == (0.0, 0.0) or timeout <= 0 or self.clock.now() - self._command_t <= timeout:
             return False
-        self.log.warning("no /cmd_vel for a while: stopping", timeout_s=timeout)
+        now = self.clock.now()
+        if now - self._timeout_logged_at >= TIMEOUT_LOG_EVERY_S:  # the counter has them all
+            self._timeout_logged_at = now
+            self.log.warning("no /cmd_vel for a while: stopping", timeout_s=timeout,
+                             times=self.counters["cmd_timeouts"] + 1)
         self.counters["cmd_timeouts"] += 1
         self.command = (0.0, 0.0)
         self._write(0.0, 0.0)
