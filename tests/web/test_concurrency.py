@@ -35,7 +35,9 @@ def _last_cmd(robot: Any) -> list[Twist]:
     return got
 
 
-def test_a_double_click_then_cancel_answers_and_leaves_the_robot_stopped(robot: Any, operator: httpx.Client) -> None:
+def test_a_double_click_then_cancel_answers_and_leaves_the_robot_stopped(
+    robot: Any, operator: httpx.Client
+) -> None:
     cmds = _last_cmd(robot)
     with ThreadPoolExecutor(2) as pool:
         clicks = list(pool.map(lambda _: operator.post("/api/goal", json={"place": PLACE}), range(2)))

@@ -337,8 +337,8 @@ async def _process_fault(robot: RobotSide, speed: float, supervised: bool, sig: 
 
 
 CASES = ("socket_closed", "client_silent", "client_frozen", "estop", "navigator_silent", "web_crashed",
-         "bridge_dead_in_process", "bridge_dead_supervised", "process_frozen_supervised", "process_killed_supervised",
-         "process_killed_unsupervised")
+         "bridge_dead_in_process", "bridge_dead_supervised", "process_frozen_supervised",
+         "process_killed_supervised", "process_killed_unsupervised")
 
 
 async def _one(case: str, robot: RobotSide, args: argparse.Namespace, clients: _ClientThread,
