@@ -73,7 +73,8 @@ def _wait(cond: object, timeout: float) -> bool:
 
 
 def _start_supervised(port: str) -> tuple[subprocess.Popen[str], int]:
-    cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce", "--port", port, "--",
+    cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce",
+               "--firmware", "documented", "--port", port, "--",
            sys.executable, "-c", CHILD, port, str(SPEED_MPS)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None

@@ -33,7 +33,7 @@ import time
 from types import FrameType
 from typing import Any
 
-from sage_robot.hardware.mcu import protocol as proto
+from sage_robot.hardware.mcu.dialects import dialect
 from sage_robot.hardware.mcu.port import HEARTBEAT_FD_ENV, find_port
 
 SUPERVISED_ENV = "SAGE_SUPERVISED"  # set in the child: it must not start a supervisor itself
@@ -44,16 +44,16 @@ STOP_GAP_S = 0.02  # between them (s)
 DEFAULT_BAUD = 115200
 
 
-def stop_frame() -> bytes:
-    """The bytes that stop the robot (a zero velocity command)."""
-    return proto.encode(proto.CMD, (0.0, 0.0))
+def stop_frame(firmware: str = "seed-2025") -> bytes:
+    """The bytes that stop the robot in ``firmware``'s dialect, whatever its alignment."""
+    return dialect(firmware).stop()
 
 
 class LastWord:
     """The MCU port, held open by the parent to write the stop when the child is gone."""
 
-    def __init__(self, configured: str, baud: int = DEFAULT_BAUD) -> None:
-        self.configured, self.baud = configured, baud
+    def __init__(self, configured: str, baud: int = DEFAULT_BAUD, firmware: str = "seed-2025") -> None:
+        self.configured, self.baud, self.firmware = configured, baud, firmware
         self.port: Any = None
         self.path = ""
 
@@ -72,7 +72,7 @@ class LastWord:
         """Write the stop frames; True when they went out."""
         if self.port is None and not self.open():
             return False
-        frame = stop_frame()
+        frame = stop_frame(self.firmware)
         try:
             for i in range(STOP_REPEATS):
                 self.port.write(frame)
@@ -91,9 +91,10 @@ class LastWord:
             self.port = None
 
 
-def supervise(cmd: list[str], port: str, baud: int = DEFAULT_BAUD, announce: bool = False) -> int:
+def supervise(cmd: list[str], port: str, baud: int = DEFAULT_BAUD, announce: bool = False,
+              firmware: str = "seed-2025") -> int:
     """Run ``cmd`` as the child and stop the motors when it ends or stalls; its exit status."""
-    last = LastWord(port, baud)
+    last = LastWord(port, baud, firmware)
     last.open()
     beat_r, beat_w = os.pipe()
     env = dict(os.environ, **{SUPERVISED_ENV: "1", HEARTBEAT_FD_ENV: str(beat_w)})
@@ -147,12 +148,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--port", required=True, help="the MCU serial port ('auto' finds /dev/ttyACM*)")
     p.add_argument("--baud", type=int, default=DEFAULT_BAUD)
     p.add_argument("--announce", action="store_true", help="print 'child PID' on stdout")
+    p.add_argument("--firmware", default="seed-2025", choices=["seed-2025", "documented"],
+                   help="the MCU firmware's dialect (mcu.firmware)")
     p.add_argument("cmd", nargs=argparse.REMAINDER, help="-- then the command to run")
     args = p.parse_args(argv)
     cmd = args.cmd[1:] if args.cmd[:1] == ["--"] else args.cmd
     if not cmd:
         p.error("give the command to run after --")
-    return supervise(cmd, args.port, args.baud, args.announce)
+    return supervise(cmd, args.port, args.baud, args.announce, args.firmware)
 
 
 if __name__ == "__main__":

@@ -308,7 +308,8 @@ async def _process_fault(robot: RobotSide, speed: float, supervised: bool, sig: 
     """SAGE's process (bridge + publisher) gets ``sig`` (SIGKILL, SIGSTOP) mid-drive."""
     cmd = [sys.executable, "-c", CHILD, robot.port, str(speed)]
     if supervised:
-        cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce", "--port", robot.port,
+        cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce",
+               "--firmware", "documented", "--port", robot.port,
                "--", *cmd]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     child_pid, last = proc.pid, 0.0

@@ -182,7 +182,7 @@ def run_up(args: argparse.Namespace) -> int:
     if not args.no_supervisor and not os.environ.get(SUPERVISED_ENV):
         # This process becomes the supervisor; the robot runs in a child that it watches.
         child = [sys.executable, "-m", "sage_robot.cli.main", *sys.argv[1:]]
-        return supervise(child, settings.mcu.port, settings.mcu.baud)
+        return supervise(child, settings.mcu.port, settings.mcu.baud, firmware=settings.mcu.firmware)
     ctx = make_context(settings, simulated=False)
     asyncio.run(run_launcher(ctx, specs_for(args.mode)))
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from typing import Literal
 
 from pydantic import Field, model_validator
 
@@ -28,6 +29,12 @@ class RobotSettings(Section):
 
 
 class McuSettings(Section):
+    firmware: Literal["seed-2025", "documented"] = Field(
+        "seed-2025",
+        description="The STM32 firmware's dialect: 'seed-2025' (what the seed robot runs today: "
+        "9-byte 0x78 commands, no watchdog, no battery frames) or 'documented' (the seed "
+        "document's framed protocol with a watchdog and BATTERY frames). docs/mcu.md.",
+    )
     port: str = Field("auto", description="Serial device, or 'auto' to find /dev/ttyACM*.")
     baud: int = Field(115200, gt=0, description="Serial speed (baud).")
     resend_hz: float = Field(20.0, ge=10.0, description="Re-send rate of a standing command (Hz).")

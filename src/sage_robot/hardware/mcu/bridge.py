@@ -1,5 +1,11 @@
 """SerialBridgeNode: the bus <-> STM32 link (the seed's serial_bridge.py).
 
+- Speaks the firmware's dialect (``mcu.firmware``: ``seed-2025`` or ``documented``,
+  :mod:`sage_robot.hardware.mcu.dialects`). A stop is always written so that the firmware
+  applies it whatever its alignment; with a block-aligned firmware (seed-2025) an
+  :class:`AlignmentWatch` compares commands with odometry and realigns it by single
+  filler bytes when commands stop taking effect; a boot banner is logged and evented.
+
 - ``/cmd_vel`` -> CMD frames, clamped to the profile's limits (never reverse unless the
   profile allows it); a standing non-zero command is re-sent at ``mcu.resend_hz`` so the
   MCU's 550 ms watchdog never trips mid-motion; a stop is sent on zero, on shutdown, and
@@ -41,6 +47,7 @@ from sage_robot.core.msgs import (
 )
 from sage_robot.core.node import Node
 from sage_robot.hardware.mcu import protocol as proto
+from sage_robot.hardware.mcu.alignment import AlignmentWatch
 from sage_robot.hardware.mcu.convert import (
     ImuCalibrator,
     VoltageSmoother,
@@ -48,6 +55,7 @@ from sage_robot.hardware.mcu.convert import (
     clamp_command,
     odometry_from,
 )
+from sage_robot.hardware.mcu.dialects import BannerWatch, dialect
 from sage_robot.hardware.mcu.port import HEARTBEAT_PERIOD_S, find_port, heartbeat_fd, open_port
 
 PORT_RESOURCE = "mcu_port"  # ctx.resources key: a port path set by the simulator
@@ -64,6 +72,12 @@ class SerialBridgeNode(Node):
 
     async def setup(self) -> None:
         self.mcu = self.settings.mcu
+        self.dialect = dialect(self.mcu.firmware)
+        self.align = AlignmentWatch() if self.dialect.block_aligned else None
+        self.banner = BannerWatch()
+        self._rebooted = threading.Event()  # the RX thread saw a boot banner
+        self._odom_twist: tuple[float, float] | None = None  # latest ODOM (v, w), from the RX thread
+        self._realign_pending = False
         robot = self.settings.robot
         self._limits = (robot.max_linear_mps, robot.max_angular_radps, robot.allow_reverse)
         self.decoder = proto.Decoder(accept=FROM_MCU)
@@ -112,6 +126,8 @@ class SerialBridgeNode(Node):
         v, w = clamp_command(msg.linear_x, msg.angular_z, *self._limits)
         if (v, w) != (msg.linear_x, msg.angular_z):
             self.counters["cmd_clamped"] += 1
+        if self.align is not None and (v, w) != self.command:
+            self.align.reset()
         self.command, self._command_t = (v, w), self.clock.now()
         self._write(v, w)
 
@@ -121,7 +137,9 @@ class SerialBridgeNode(Node):
         self._write(*self.command)
 
     def _check_timeout(self) -> bool:
-        """Stop a command nobody repeats any more; True when it did."""
+        """Stop a command nobody repeats any more; True when it did. Also watches the
+        firmware's alignment (seed-2025) and its reboots."""
+        self._watch_firmware()
         timeout = self.mcu.cmd_timeout_s
         if self.command == (0.0, 0.0) or timeout <= 0 or self.clock.now() - self._command_t <= timeout:
             return False
@@ -135,6 +153,26 @@ class SerialBridgeNode(Node):
         self._write(0.0, 0.0)
         return True
 
+    def _watch_firmware(self) -> None:
+        if self._rebooted.is_set():
+            self._rebooted.clear()
+            self.counters["mcu_reboots"] += 1
+            self.log.warning("the MCU rebooted (boot banner)", banner=self.banner.last)
+            self._event("mcu_rebooted", f"the MCU rebooted ({self.banner.last})")
+            if self.align is not None:
+                self.align.reset()
+        if self.align is None or self._port is None:
+            return
+        action = self.align.update(self.command, self._odom_twist, self.clock.now())
+        if action == "step":
+            self.counters["realign_bytes"] += 1
+            self._realign_pending = True  # one filler byte before the next command
+            self._write(*self.command)
+        elif action == "stop":
+            self.counters["stop_repeats"] += 1
+            self.log.warning("still moving after a stop: stop sent again")
+            self._write(0.0, 0.0)
+
     def _beat(self) -> None:
         assert self._beat_fd is not None
         # A full pipe is a live parent that is behind; a gone one can't hear.
@@ -147,8 +185,11 @@ class SerialBridgeNode(Node):
             return
         import serial
 
+        data = self.dialect.stop() if (v, w) == (0.0, 0.0) else self.dialect.command(v, w)
+        if self._realign_pending:
+            data, self._realign_pending = self.dialect.realign_step() + data, False
         try:
-            port.write(proto.encode(proto.CMD, (v, w)))
+            port.write(data)
             self.counters["cmd_sent"] += 1
         except serial.SerialTimeoutException:
             self.counters["write_timeouts"] += 1
@@ -181,6 +222,9 @@ class SerialBridgeNode(Node):
         self.counters["connects"] += 1
         self._port, self.port_path, self._down_logged = port, path, False
         self.decoder.reset()
+        self._odom_twist = None
+        if self.align is not None:
+            self.align.reset()
         self._lost.clear()
         self._rx_stop = threading.Event()
         self._rx_thread = threading.Thread(
@@ -236,6 +280,8 @@ class SerialBridgeNode(Node):
             while not stop.is_set():
                 data = port.read(port.in_waiting or 1)
                 if data:
+                    if self.banner.feed(data):
+                        self._rebooted.set()
                     for frame in self.decoder.feed(data):
                         self._on_frame(frame)
         except Exception as exc:  # SerialException/OSError on unplug; anything else too
@@ -246,6 +292,7 @@ class SerialBridgeNode(Node):
         now = self.clock.now()
         kind = frame.kind
         if kind is proto.ODOM:
+            self._odom_twist = (frame.values[3], frame.values[4])
             self.bus.publish_threadsafe(topics.ODOM, odometry_from(frame.values, now))
         elif kind is proto.BATTERY:
             self.battery_raw_v = frame.values[0]
@@ -317,5 +364,7 @@ class SerialBridgeNode(Node):
             "command": list(self.command),
             "imu_calibrated": bool(self.calibrator and self.calibrator.bias is not None),
             "battery_raw_v": None if self.battery_raw_v is None else round(self.battery_raw_v, 3),
+            "firmware": self.dialect.name,
+            "banner": self.banner.last,
             **dict(self.counters),
         }

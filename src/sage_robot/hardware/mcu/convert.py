@@ -1,7 +1,7 @@
 """Pure conversions between MCU frames and bus messages (no I/O, no clock).
 
 Conventions: REP 103 (x forward, y left, theta counter-clockwise); the firmware's
-theta is in [0, 2 pi), the bus's in [-pi, pi).
+theta is in [0, 2 pi) (documented) or (-2 pi, 2 pi) (seed-2025), the bus's in [-pi, pi).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def clamp_command(v: float, w: float, max_v: float, max_w: float, allow_reverse:
 
 
 def odometry_from(values: Sequence[float], stamp: float) -> Odometry:
-    """ODOM payload (x, y, theta in [0, 2 pi), v, w) -> Odometry in odom/base_link."""
+    """ODOM payload (x, y, theta in (-2 pi, 2 pi), v, w) -> Odometry in odom/base_link."""
     x, y, theta, v, w = values
     return Odometry(
         stamp=stamp,

@@ -77,7 +77,7 @@ class FrameType:
 MAX_SPEED_MPS = 5.0
 MAX_TURN_RADPS = 20.0
 MAX_POSITION_M = 1.0e5  # 100 km of dead reckoning
-THETA_SLACK_RAD = 1e-3  # float32 rounding at the ends of [0, 2 pi)
+THETA_SLACK_RAD = 1e-3  # float32 rounding at the ends of (-2 pi, 2 pi)
 MAX_GYRO_RADPS = 35.0  # BNO08x full scale is 2000 deg/s ~ 34.9 rad/s
 MAX_ACCEL_MPS2 = 160.0  # 16 g
 MAX_BATTERY_V = 60.0
@@ -100,7 +100,9 @@ ODOM = FrameType(
     (
         FieldSpec("x", "m", -MAX_POSITION_M, MAX_POSITION_M),
         FieldSpec("y", "m", -MAX_POSITION_M, MAX_POSITION_M),
-        FieldSpec("theta", "rad", -THETA_SLACK_RAD, TWO_PI + THETA_SLACK_RAD),
+        # The documented firmware wraps theta to [0, 2 pi); the seed-2025 firmware sends
+        # fmodf(theta, 2 pi), negative after a net clockwise turn: both are accepted.
+        FieldSpec("theta", "rad", -TWO_PI - THETA_SLACK_RAD, TWO_PI + THETA_SLACK_RAD),
         FieldSpec("v", "m/s", -MAX_SPEED_MPS, MAX_SPEED_MPS),
         FieldSpec("w", "rad/s", -MAX_TURN_RADPS, MAX_TURN_RADPS),
     ),
