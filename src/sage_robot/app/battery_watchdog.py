@@ -7,6 +7,10 @@ jittering voltage does not flap or storm), publishes ``battery_low`` /
 to its dock; the operator page shows the event) and sends at most one e-mail per level
 per ``email.min_interval_s``, retried in the background — a dead mail server never
 stops the node.
+
+A reading with an unknown charge (NaN: firmware that reports no battery, such as the seed
+robot's current one) changes no level; the first one is logged once as a warning and
+published as a ``battery_unknown`` event, so nobody mistakes silence for a full battery.
 """
 
 from __future__ import annotations
@@ -104,6 +108,7 @@ class BatteryWatchdogNode(Node):
         self.mails_sent = 0
         self.mails_failed = 0
         self.last_state: BatteryState | None = None
+        self.unknown_warned = False
 
     async def setup(self) -> None:
         if self._mailer is None:
@@ -112,6 +117,9 @@ class BatteryWatchdogNode(Node):
 
     def _on_battery(self, msg: BatteryState) -> None:
         self.last_state = msg
+        if math.isnan(msg.percentage):
+            self._warn_unknown()
+            return
         changed = self.monitor.update(msg.percentage)
         if changed is None:
             return
@@ -137,6 +145,14 @@ class BatteryWatchdogNode(Node):
         )
         if changed is not BatteryLevel.OK:
             self._maybe_mail(changed, text)
+
+    def _warn_unknown(self) -> None:
+        if self.unknown_warned:
+            return
+        self.unknown_warned = True
+        text = "No battery readings: the battery level is unknown (the MCU firmware reports none)."
+        self.log.warning(text)
+        self.bus.publish(topics.EVENTS, Event(self.clock.now(), self.name, "battery_unknown", text))
 
     def _maybe_mail(self, level: BatteryLevel, text: str) -> None:
         if self._mailer is None:
@@ -167,8 +183,9 @@ class BatteryWatchdogNode(Node):
         await asyncio.Event().wait()
 
     def stats(self) -> dict[str, Any]:
+        unknown = self.last_state is None or math.isnan(self.last_state.percentage)
         return {
-            "level": self.monitor.level.value,
+            "level": "unknown" if unknown else self.monitor.level.value,
             "mails_sent": self.mails_sent,
             "mails_failed": self.mails_failed,
         }

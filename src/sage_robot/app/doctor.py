@@ -53,6 +53,7 @@ def check_python(settings: Settings) -> Check:
 
 
 def check_mcu(settings: Settings) -> Check:
+    from sage_robot.hardware.mcu.dialects import BannerWatch, guess
     from sage_robot.hardware.mcu.port import find_port, open_port
     from sage_robot.hardware.mcu.protocol import Decoder
 
@@ -61,12 +62,14 @@ def check_mcu(settings: Settings) -> Check:
         port = open_port(path, settings.mcu.baud)
     except DeviceNotConnectedError as exc:
         return Check("mcu", False, f"absent: {exc}", "plug in the STM32 (USB-C); check `ls /dev/ttyACM*`")
-    decoder = Decoder()
+    decoder, banner = Decoder(), BannerWatch()
     frames = 0
     t0 = time.monotonic()
     try:
         while time.monotonic() - t0 < MCU_LISTEN_S:
-            frames += len(decoder.feed(port.read(256)))
+            data = port.read(256)
+            banner.feed(data)
+            frames += len(decoder.feed(data))
     finally:
         port.close()
     rate = frames / MCU_LISTEN_S
@@ -79,7 +82,14 @@ def check_mcu(settings: Settings) -> Check:
         )
     counts = ", ".join(f"{k} {v / MCU_LISTEN_S:.0f}/s" for k, v in sorted(decoder.stats.frames.items()))
     errors = sum(decoder.stats.errors.values())
-    return Check("mcu", True, f"{path}: {rate:.0f} frames/s ({counts}); {errors} bad frames")
+    seems, configured = guess(dict(decoder.stats.frames), banner.banners), settings.mcu.firmware
+    detail = f"{path}: {rate:.0f} frames/s ({counts}); {errors} bad frames; firmware seems {seems}"
+    if seems not in ("unknown", configured):
+        return Check("mcu", False, f"{detail}, but the profile says mcu.firmware: {configured}",
+                     f"set mcu.firmware: {seems} in the profile (docs/mcu.md): the robot ignores "
+                     "commands in the other dialect")
+    battery = "" if seems != "seed-2025" else " (no battery frames: the battery shows as unknown)"
+    return Check("mcu", True, detail + battery)
 
 
 def check_lidar(settings: Settings) -> Check:

@@ -1,10 +1,13 @@
 """`sage mcu monitor` and `sage mcu drive`: the first tools to plug into the real robot.
 
 ``monitor`` prints the decoded frames, their rates and the link's error counts once a
-second (``--frames``: every frame). ``drive`` is a bounded test drive: the command is
-clamped to the profile's limits (never reverse), re-sent at ``mcu.resend_hz``, and a
-stop is sent at the end and on Ctrl-C. ``--sim`` runs either against the firmware
-model behind a pseudo-terminal instead of a serial port.
+second (``--frames``: every frame), and which firmware dialect the MCU seems to speak (a
+``WHO_AM_I`` boot banner, ODOM without BATTERY frames: seed-2025; BATTERY frames:
+documented), with a warning when that disagrees with the profile's ``mcu.firmware``.
+``drive`` is a bounded test drive in the profile's dialect (``--firmware`` overrides it):
+the command is clamped to the profile's limits (never reverse), re-sent at
+``mcu.resend_hz``, and a stop is sent at the end and on Ctrl-C. ``--sim`` runs either
+against the firmware model behind a pseudo-terminal instead of a serial port.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 def _port_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", help="serial device (default: mcu.port of the profile, 'auto')")
+    p.add_argument("--firmware", choices=["seed-2025", "documented"],
+                   help="the firmware's dialect (default: mcu.firmware of the profile)")
     p.add_argument("--sim", action="store_true", help="use the firmware model on a pty")
 
 
@@ -53,7 +58,8 @@ def _open_link(args: argparse.Namespace) -> Iterator[tuple[Any, Any, str]]:
     from sage_robot.core.config import load_profile
     from sage_robot.hardware.mcu.port import find_port, open_port
 
-    settings = load_profile(args.profile)
+    overrides = {"mcu": {"firmware": args.firmware}} if args.firmware else None
+    settings = load_profile(args.profile, overrides)
     sim = None
     if args.sim:
         from sage_robot.sim.mcu_pty import RealTimeMcu
@@ -89,16 +95,21 @@ def _fmt(values: dict[str, float]) -> str:
 def run_monitor(args: argparse.Namespace) -> int:
     from sage_robot.hardware.mcu import protocol as proto
     from sage_robot.hardware.mcu.convert import battery_percentage
+    from sage_robot.hardware.mcu.dialects import BannerWatch
 
     with _open_link(args) as (port, settings, label):
         print(f"monitoring {label} at {settings.mcu.baud} baud; Ctrl-C to stop")
         decoder = proto.Decoder()
+        banner = BannerWatch()
         latest: dict[str, proto.Frame] = {}
         t0 = last = time.monotonic()
         counts_at_last: dict[str, int] = {}
         try:
             while args.seconds is None or time.monotonic() - t0 < args.seconds:
-                for frame in decoder.feed(_read(port)):
+                data = _read(port)
+                if banner.feed(data):
+                    print(f"{time.monotonic() - t0:8.3f} boot banner: {banner.last} (the MCU (re)started)")
+                for frame in decoder.feed(data):
                     latest[frame.kind.name] = frame
                     if args.frames:
                         print(f"{time.monotonic() - t0:8.3f} {frame.kind.name:<8} {_fmt(frame.as_dict())}")
@@ -113,9 +124,21 @@ def run_monitor(args: argparse.Namespace) -> int:
             f"total: frames {dict(st.frames)}, bytes {st.bytes_in}, dropped {st.bytes_dropped}, "
             f"errors {dict(st.errors) or 'none'}"
         )
+        _say_dialect(dict(st.frames), banner, settings.mcu.firmware)
         if not st.frames:
             raise SageError(f"no frames decoded from {label}: wrong port, or the MCU is not running")
     return 0
+
+
+def _say_dialect(frames: dict[str, int], banner: Any, configured: str) -> None:
+    from sage_robot.hardware.mcu.dialects import guess
+
+    seems = guess(frames, banner.banners)
+    why = f"banner {banner.last!r}, " if banner.banners else ""
+    print(f"firmware: seems to speak {seems} ({why}frames {frames or 'none'}); the profile says {configured}")
+    if seems not in ("unknown", configured):
+        print(f"WARNING: set mcu.firmware: {seems} in the profile (docs/mcu.md), or the robot "
+              "will not accept SAGE's commands")
 
 
 def _summary(
@@ -137,6 +160,7 @@ def _summary(
 def run_drive(args: argparse.Namespace) -> int:
     from sage_robot.hardware.mcu import protocol as proto
     from sage_robot.hardware.mcu.convert import clamp_command
+    from sage_robot.hardware.mcu.dialects import dialect
 
     if not 0 < args.seconds <= MAX_DRIVE_S:
         raise SageError(f"--seconds must be in (0, {MAX_DRIVE_S:g}], got {args.seconds:g}")
@@ -147,17 +171,19 @@ def run_drive(args: argparse.Namespace) -> int:
         )
         if (v, w) != (args.v, args.w):
             print(f"command clamped to the profile's limits: v={v:g} m/s, w={w:g} rad/s")
-        print(f"driving v={v:g} m/s w={w:g} rad/s for {args.seconds:g} s on {label}; Ctrl-C stops")
+        speech = dialect(settings.mcu.firmware)
+        print(f"driving v={v:g} m/s w={w:g} rad/s for {args.seconds:g} s on {label} "
+              f"({speech.name} firmware); Ctrl-C stops")
         decoder = proto.Decoder()
         odom: dict[str, float] = {}
         period = 1.0 / settings.mcu.resend_hz
-        stop_frame = proto.encode(proto.CMD, (0.0, 0.0))
+        stop_frame = speech.stop()  # applied whatever a block-aligned firmware's alignment
         try:
             t0 = time.monotonic()
             next_send = next_report = t0
             while (now := time.monotonic()) - t0 < args.seconds:
                 if now >= next_send:
-                    port.write(proto.encode(proto.CMD, (v, w)))
+                    port.write(speech.command(v, w))
                     next_send += period
                 for frame in decoder.feed(_read(port)):
                     if frame.kind is proto.ODOM:

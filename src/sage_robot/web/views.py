@@ -20,6 +20,7 @@ from sage_robot.core.msgs import (
     OccupancyGrid,
     Path,
     Pose2D,
+    PowerStatus,
 )
 from sage_robot.core.msgs.voice import UiState
 
@@ -30,12 +31,15 @@ GRAY_FREE = 254
 
 
 def battery_json(msg: BatteryState) -> dict[str, Any]:
-    """``percentage`` in percent (0..100) as the seed's teleop page shows it; null when unknown."""
-    pct = None if math.isnan(msg.percentage) else round(100.0 * msg.percentage, 1)
+    """``percentage`` in percent (0..100) as the seed's teleop page shows it, and ``pct``
+    (0..1) and ``is_charging`` as the seed's face reads them; null when unknown."""
+    known = not math.isnan(msg.percentage)
     return {
         "type": "battery",
-        "voltage": round(msg.voltage, 2),
-        "percentage": pct,
+        "voltage": round(msg.voltage, 2) if math.isfinite(msg.voltage) else None,
+        "percentage": round(100.0 * msg.percentage, 1) if known else None,
+        "pct": round(msg.percentage, 3) if known else None,
+        "is_charging": msg.status is PowerStatus.CHARGING,
         "status": msg.status.value,
     }
 

@@ -12,6 +12,8 @@
   when the command grows older than ``mcu.cmd_timeout_s`` (0.25 s by default: the bridge's
   own dead-man, looked at every :data:`CMD_TIMEOUT_CHECK_S` on a timer of its own, so it
   does not depend on the web deadman or the navigator being alive).
+- With a firmware that reports no battery (seed-2025) ``/battery_state`` carries NaN
+  (unknown) once a second, so every page, the brain and the watchdog say "unknown".
 - A dedicated RX thread decodes ODOM -> ``/odom``, BATTERY -> ``/battery_state`` (the
   voltage averaged over ``BATTERY_SMOOTHING_TAU_S`` on the node's clock, so the motors'
   load sag does not swing the percentage) and
@@ -29,6 +31,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import threading
 from collections import Counter
@@ -43,6 +46,7 @@ from sage_robot.core.msgs import (
     Imu,
     Level,
     Odometry,
+    PowerStatus,
     Twist,
 )
 from sage_robot.core.node import Node
@@ -336,6 +340,9 @@ class SerialBridgeNode(Node):
         self._rate_base = (now, frames)
 
     def _publish_status(self) -> None:
+        if not self.dialect.has_battery:  # the firmware reports no battery: say "unknown", never 0 %
+            self.bus.publish(topics.BATTERY, BatteryState(self.clock.now(), math.nan, math.nan,
+                                                          PowerStatus.UNKNOWN))
         self._update_rates()
         st = self.decoder.stats
         values = {

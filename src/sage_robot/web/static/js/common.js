@@ -111,8 +111,11 @@ export function el(tag, attrs = {}, ...children) {
 /** Battery text: "15.2 V · 72 %" */
 export function batteryText(msg) {
   if (!msg) return "—";
-  const pct = msg.percentage === null || msg.percentage === undefined ? "?" : Math.round(msg.percentage);
-  return `${msg.voltage.toFixed(1)} V · ${pct} %`;
+  if (msg.percentage === null || msg.percentage === undefined) {
+    return msg.voltage === null || msg.voltage === undefined ? "battery unknown" : `${msg.voltage.toFixed(1)} V · ? %`;
+  }
+  const volts = msg.voltage === null || msg.voltage === undefined ? "" : `${msg.voltage.toFixed(1)} V · `;
+  return `${volts}${Math.round(msg.percentage)} %`;
 }
 
 /** Fill a table body with node health rows. */
