@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import json
 import math
 import stat
 from pathlib import Path
@@ -125,3 +126,21 @@ def test_waypoints_file_is_named_shortly_and_the_shipped_one_is_read_only(tmp_pa
     assert own["path"] == str(copy)
     gone = waypoints_info(load_profile(None, {"nav": {"waypoints": str(tmp_path / "no" / "w.yaml")}}))
     assert not gone["writable"] and "cannot be written" in gone["note"]
+
+
+def test_battery_json_carries_the_seed_face_fields_and_unknown_is_null() -> None:
+    from sage_robot.core.msgs import PowerStatus
+
+    known = views.battery_json(BatteryState(1.0, 15.2, 0.72, PowerStatus.CHARGING))
+    fields = (known["percentage"], known["pct"], known["is_charging"], known["voltage"])
+    assert fields == (72.0, 0.72, True, 15.2)
+    unknown = views.battery_json(BatteryState(1.0, math.nan, math.nan, PowerStatus.UNKNOWN))
+    assert unknown["percentage"] is None and unknown["pct"] is None and unknown["voltage"] is None
+    assert not unknown["is_charging"]
+    json.dumps(unknown, allow_nan=False)  # valid JSON for a browser: no NaN
+
+
+def test_the_seed_face_gets_searching_while_sage_says_navigating() -> None:
+    state = {"type": "ui_state", "phase": "navigating", "tts_viseme": 0.0}
+    assert views.seed_ui_state(state)["phase"] == "searching" and state["phase"] == "navigating"
+    assert views.seed_ui_state(dict(state, phase="speaking"))["phase"] == "speaking"

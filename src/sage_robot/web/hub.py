@@ -43,6 +43,7 @@ from sage_robot.web.navstate import NavTracker
 MIN_INTERVAL_S: dict[str, float] = {
     "battery": 0.5,
     "ui_state": 0.04,  # the mouth follows tts_viseme at up to 25 Hz
+    "ui_state_seed": 0.04,  # the same for the seed's face, which knows "searching", not "navigating"
     "doa": 0.08,  # the seed's DOA server broadcast every 80 ms
     "pose": 0.1,
     "scan": 0.2,
@@ -196,7 +197,11 @@ class Hub:
         self.set("battery", views.battery_json(msg))
 
     def _on_ui_state(self, msg: UiState) -> None:
-        self.set("ui_state", views.ui_state_json(msg))
+        state = views.ui_state_json(msg)
+        self.set("ui_state", state)
+        # Sent right after it (channels go out in name order): the seed's face page shows its
+        # "searching" phase while SAGE's shows "navigating" (each ignores the other's phase).
+        self.set("ui_state_seed", views.seed_ui_state(state))
 
     def _on_doa(self, msg: Doa) -> None:
         self.set("doa", {"type": "doa", "angle": round(msg.angle_deg, 1), "source": msg.source})

@@ -44,6 +44,14 @@ def battery_json(msg: BatteryState) -> dict[str, Any]:
     }
 
 
+SEED_PHASES = {"navigating": "searching"}  # SAGE's face phase -> the seed face's name for it
+
+
+def seed_ui_state(state: dict[str, Any]) -> dict[str, Any]:
+    """The same ``ui_state`` with the phase the seed's face page knows."""
+    return dict(state, phase=SEED_PHASES.get(state["phase"], state["phase"]))
+
+
 def ui_state_json(msg: UiState) -> dict[str, Any]:
     """The seed's face protocol: ``{type: "ui_state", phase, asr_partial, ...}``."""
     return {
