@@ -21,7 +21,7 @@ from collections.abc import Iterator
 import pytest
 
 from sage_robot.bench.safety import CHILD
-from sage_robot.sim.firmware import FirmwareModel
+from sage_robot.sim.firmware import FirmwareModel, Seed2025Model
 from sage_robot.sim.mcu_pty import PtyMcu
 
 PUMP_S = 0.005  # the firmware model's step here (s)
@@ -33,11 +33,12 @@ SPEED_MPS = 0.5
 class Firmware(threading.Thread):
     """The firmware model behind a pty, pumped in real time; remembers every command."""
 
-    def __init__(self) -> None:
+    def __init__(self, dialect: str) -> None:
         super().__init__(daemon=True, name="test-firmware")
-        self.model = FirmwareModel()
+        self.model = Seed2025Model() if dialect == "seed-2025" else FirmwareModel()
         self.pty = PtyMcu(self.model)
         self.done = threading.Event()
+        self.dialect = dialect
         self.t0 = time.monotonic()
 
     def run(self) -> None:
@@ -53,9 +54,9 @@ class Firmware(threading.Thread):
         self.pty.close()
 
 
-@pytest.fixture
-def firmware() -> Iterator[Firmware]:
-    fw = Firmware()
+@pytest.fixture(params=["seed-2025", "documented"])
+def firmware(request: pytest.FixtureRequest) -> Iterator[Firmware]:
+    fw = Firmware(request.param)
     fw.start()
     try:
         yield fw
@@ -72,10 +73,9 @@ def _wait(cond: object, timeout: float) -> bool:
     return False
 
 
-def _start_supervised(port: str) -> tuple[subprocess.Popen[str], int]:
-    cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce",
-               "--firmware", "documented", "--port", port, "--",
-           sys.executable, "-c", CHILD, port, str(SPEED_MPS)]
+def _start_supervised(port: str, dialect: str) -> tuple[subprocess.Popen[str], int]:
+    cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce", "--firmware", dialect,
+           "--port", port, "--", sys.executable, "-c", CHILD, port, str(SPEED_MPS), dialect]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert proc.stdout is not None
     first = proc.stdout.readline()
@@ -85,7 +85,7 @@ def _start_supervised(port: str) -> tuple[subprocess.Popen[str], int]:
 
 @pytest.mark.parametrize("fault", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "frozen"])
 def test_the_supervisor_stops_the_motors_when_sage_dies_or_freezes(firmware: Firmware, fault: int) -> None:
-    proc, child = _start_supervised(firmware.pty.port_name)
+    proc, child = _start_supervised(firmware.pty.port_name, firmware.dialect)
     try:
         assert _wait(lambda: firmware.model.last_command[0] == pytest.approx(SPEED_MPS), DRIVING_WITHIN_S), \
             "the supervised bridge drove"

@@ -95,8 +95,9 @@ async def test_save_a_running_session_over_http(
 
         # The progress the page shows, through a logged-in session.
         opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor())
-        login = urllib.request.Request(
-            url + "/api/login", json.dumps({"password": PASSWORD}).encode(), method="POST"
+        login = urllib.request.Request(  # a JSON body says so (text/plain is refused: 415)
+            url + "/api/login", json.dumps({"password": PASSWORD}).encode(),
+            {"Content-Type": "application/json"}, method="POST",
         )
         await asyncio.to_thread(opener.open, login, None, WAIT_S)
         with await asyncio.to_thread(opener.open, url + "/api/slam/progress", None, WAIT_S) as resp:

@@ -288,7 +288,8 @@ from sage_robot.hardware.mcu.bridge import PORT_RESOURCE, SerialBridgeNode
 
 async def main():
     clock = WallClock()
-    ctx = NodeContext(Bus(clock), clock, load_profile(None))
+    firmware = sys.argv[3] if len(sys.argv) > 3 else "documented"
+    ctx = NodeContext(Bus(clock), clock, load_profile(None, {"mcu": {"firmware": firmware}}))
     ctx.resources[PORT_RESOURCE] = sys.argv[1]
     bridge = SerialBridgeNode(ctx)
     await bridge.setup()

@@ -62,9 +62,14 @@ def _open_link(args: argparse.Namespace) -> Iterator[tuple[Any, Any, str]]:
     settings = load_profile(args.profile, overrides)
     sim = None
     if args.sim:
+        import numpy as np
+
+        from sage_robot.sim.firmware import make_firmware
         from sage_robot.sim.mcu_pty import RealTimeMcu
 
-        sim = RealTimeMcu()
+        model = make_firmware(settings.mcu.firmware, settings.robot.track_width_m,
+                              np.random.default_rng(settings.sim.seed))
+        sim = RealTimeMcu(model)
         path = sim.port_name
     else:
         path = find_port(args.port or settings.mcu.port)

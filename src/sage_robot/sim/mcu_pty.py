@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from sage_robot.core.node import SIM_STEP_HOOKS, Node
-from sage_robot.sim.firmware import FirmwareModel, FirmwareParams
+from sage_robot.sim.firmware import FirmwareModel, SimFirmware, make_firmware
 from sage_robot.sim.flat_floor import FlatFloor, SimBody
 
 BAUD = termios.B115200
@@ -43,6 +43,7 @@ RUNTIME_SUBDIR = "sage"  # under $XDG_RUNTIME_DIR
 LINK_DIR_PREFIX = "mcu-"  # mcu-<owner pid>-<random>: one per PtyMcu
 _LINK_DIR = re.compile(rf"^{LINK_DIR_PREFIX}(\d+)-")
 PRIVATE_MODE = 0o700
+TRACK_MISMATCH_M = 1e-6  # firmware vs body track width difference worth a warning (m)
 
 _log = logging.getLogger("sage.sim.mcu_pty")
 
@@ -109,7 +110,7 @@ class PtyMcu:
     """A pty pair with the firmware model on the master side. ``base``: where the link's
     directory goes (default :func:`runtime_dir`; stale ones there are removed first)."""
 
-    def __init__(self, firmware: FirmwareModel, base: Path | None = None) -> None:
+    def __init__(self, firmware: SimFirmware, base: Path | None = None) -> None:
         self.firmware = firmware
         base = base if base is not None else runtime_dir()
         if base is not None:
@@ -203,6 +204,8 @@ class PtyMcu:
 class McuSimNode(Node):
     """The simulated MCU: firmware model + pty + a body, stepped before each clock step.
 
+    The model is the dialect ``mcu.firmware`` names (``sim/firmware/dialects.py``).
+
     Puts the pty's path in ``ctx.resources["mcu_port"]`` for the serial bridge. The body
     is ``ctx.resources["sim_world"].body`` when a world provides one (any
     :class:`SimBody`), else a :class:`FlatFloor` of its own.
@@ -213,9 +216,15 @@ class McuSimNode(Node):
     async def setup(self) -> None:
 
         robot = self.settings.robot
-        params = FirmwareParams(track_width_m=robot.track_width_m)
         rng = np.random.default_rng(self.settings.sim.seed)
-        self.firmware = FirmwareModel(params, rng)
+        dialect = self.settings.mcu.firmware
+        self.firmware = make_firmware(dialect, robot.track_width_m, rng)
+        fw_track = self.firmware.params.track_width_m
+        if abs(fw_track - robot.track_width_m) > TRACK_MISMATCH_M:
+            self.log.warning(
+                "the firmware's track differs from the body's: turns come out scaled",
+                firmware=dialect, firmware_track_m=fw_track, body_track_m=robot.track_width_m,
+            )
         self.floor = FlatFloor(robot.track_width_m)
         self.pty = PtyMcu(self.firmware)
         self.ctx.resources[PORT_RESOURCE] = self.pty.port_name
@@ -267,10 +276,10 @@ class RealTimeMcu:
     ``sage bench mcu``). Use as a context manager; ``port_name`` is the pty link.
     """
 
-    def __init__(self, firmware: FirmwareModel | None = None, step_s: float = 0.01) -> None:
+    def __init__(self, firmware: SimFirmware | None = None, step_s: float = 0.01) -> None:
         import threading
 
-        self.firmware = firmware or FirmwareModel()
+        self.firmware: SimFirmware = firmware or FirmwareModel()
         self.floor = FlatFloor(self.firmware.params.track_width_m)
         self.pty = PtyMcu(self.firmware)
         self.port_name = self.pty.port_name
