@@ -120,3 +120,24 @@ async def test_no_battery_frames_means_unknown_never_zero(seed: Rig) -> None:
     assert seed.battery, "the bridge says something about the battery"
     assert all(math.isnan(b.percentage) and math.isnan(b.voltage) for b in seed.battery)
     assert "BATTERY" not in seed.bridge.stats()["frames"]
+
+
+async def test_a_byte_lost_inside_a_frame_runs_wild_and_is_stopped(seed: Rig) -> None:
+    """The one harm left: the firmware applies a shifted, out-of-range command (it has no
+    range check). The bridge sees odometry beyond the profile's limits, sends the stop (it
+    lands) and raises an event for the operator. (The model's PI, like the firmware's, has
+    no anti-windup: after a 1e30 command its integrator keeps the wheels turning long after
+    the stop — the owners' firmware needs a range check; docs/mcu.md.)"""
+    events: list[Event] = []
+    seed.ctx.bus.subscribe(topics.EVENTS, Event, events.append, maxsize=100)
+    applied = _record_applied(seed)
+    seed.command(0.3)
+    await seed.until(lambda: _moving(seed, 0.3), 4.0)
+    frame = seed.bridge.dialect.command(0.3, 0.0)
+    seed.bridge._port.write(frame[:5] + frame[6:])  # one payload byte lost on the line
+    await seed.run(0.1)
+    assert any(abs(w) > 1e3 for _, w in applied), "a wild command was applied (no range check)"
+    await seed.until(lambda: seed.bridge.align.runaways >= 1, 2.0)
+    await seed.until(lambda: seed.firmware.last_command == (0.0, 0.0), 1.0)  # the stop burst landed
+    await seed.run(0.1)
+    assert [e.kind for e in events].count("mcu_runaway") == 1

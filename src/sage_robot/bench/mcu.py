@@ -4,6 +4,8 @@
 Hz) fed in 64-byte chunks (a USB full-speed CDC packet) and in 4 KiB chunks.
 ``cmd_latency``: the real SerialBridgeNode on a wall-clock bus writes to a pty; a thread on
 the master side timestamps each new CMD frame's arrival; latency = arrival - publish.
+``dialects``: per firmware dialect, commands applied / sent, wild commands, /cmd_vel silence
+and kill -9 to a stop on the wire (:mod:`sage_robot.bench.mcu_dialects`).
 """
 
 from __future__ import annotations
@@ -25,8 +27,11 @@ CMD_WAIT_S = 1.0  # give up on one command after this (counted as lost)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    from sage_robot.bench import mcu_dialects
+
     p.add_argument("--frames", type=int, default=200_000, help="frames for the decoder case")
     p.add_argument("--commands", type=int, default=500, help="/cmd_vel messages for latency")
+    mcu_dialects.add_arguments(p)
 
 
 def _decoder_case(n_frames: int, chunk: int) -> dict[str, Any]:
@@ -130,5 +135,8 @@ async def _latency_case(n: int) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     decoder = [_decoder_case(args.frames, c) for c in (USB_PACKET_BYTES, BIG_CHUNK_BYTES)]
+    from sage_robot.bench.mcu_dialects import run_dialects
+
     latency = asyncio.run(_latency_case(args.commands))
-    return {"bench": "mcu", "decoder": decoder, "cmd_latency": latency}
+    dialects = asyncio.run(run_dialects(args))
+    return {"bench": "mcu", "decoder": decoder, "cmd_latency": latency, "dialects": dialects}

@@ -50,7 +50,7 @@ from sage_robot.bench.web import BENCH_PASSWORD_ENV, _ClientThread
 STEP_S = 0.005  # firmware model step on the wall clock (s)
 DRIVE_S = 2.0  # drive this long before the fault, to reach a steady speed (s)
 REPEAT_S = 0.1  # the teleop page repeats a held command this often (s)
-OBSERVE_S = 3.0  # after the fault, watch this long at most (s)
+OBSERVE_S = 6.0  # after the fault, watch this long at most (s): seed-2025's PI brakes slowly
 TARGET_ZERO_S = 0.3
 TARGET_REST_S = 0.6
 CHILD_READY_S = 20.0  # a child process must be driving within this (s)
@@ -61,20 +61,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=float, default=0.5, help="driving speed before the fault (m/s)")
     p.add_argument("--repeats", type=int, default=3, help="runs of each case (the worst is reported)")
     p.add_argument("--cases", default="", help="comma-separated subset of the cases")
+    p.add_argument("--firmware", default="documented", choices=["documented", "seed-2025"],
+                   help="the firmware model's dialect (and the bridge's, and the supervisor's)")
 
 
 class RobotSide(threading.Thread):
     """The firmware model behind a pty, stepped in real time; records when it stops."""
 
-    def __init__(self) -> None:
+    def __init__(self, firmware: str = "documented") -> None:
         super().__init__(daemon=True, name="bench-firmware")
+        import numpy as np
+
         from sage_robot.core.config import load_profile
-        from sage_robot.sim.firmware import FirmwareModel, FirmwareParams
+        from sage_robot.sim.firmware import make_firmware
         from sage_robot.sim.flat_floor import FlatFloor
         from sage_robot.sim.mcu_pty import PtyMcu
 
         track = load_profile(None).robot.track_width_m
-        self.firmware = FirmwareModel(FirmwareParams(track_width_m=track))
+        self.dialect = firmware
+        self.firmware = make_firmware(firmware, track, np.random.default_rng(0))
         self.floor = FlatFloor(track)
         self.pty = PtyMcu(self.firmware)
         self.t0 = time.monotonic()
@@ -113,6 +118,18 @@ class RobotSide(threading.Thread):
 
     def speed(self) -> float:
         return 0.5 * sum(self.firmware.wheel_speeds)
+
+    async def reset(self) -> None:
+        """Between cases: a robot nothing stopped (no watchdog, no supervisor) is stopped by
+        hand, as an operator would with the power switch, and allowed to come to rest."""
+        from sage_robot.hardware.mcu.dialects import dialect
+
+        if self.firmware.last_command != (0.0, 0.0):
+            with self.lock:
+                self.firmware.receive(dialect(self.dialect).stop())
+        deadline = time.monotonic() + OBSERVE_S
+        while time.monotonic() < deadline and not self.firmware.stopped:
+            await asyncio.sleep(0.02)
 
     def close(self) -> None:
         self.stop_flag.set()
@@ -183,7 +200,7 @@ class Operator:
 class Stack:
     """The SAGE side in this process: serial bridge + web server on the wall clock."""
 
-    def __init__(self, port: str) -> None:
+    def __init__(self, port: str, firmware: str = "documented") -> None:
         from sage_robot.core.bus import Bus
         from sage_robot.core.clock import WallClock
         from sage_robot.core.config import load_profile
@@ -191,7 +208,8 @@ class Stack:
         from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
 
         clock = WallClock()
-        settings = load_profile(None, {"web": {"host": "127.0.0.1", "port": 0}})
+        overrides = {"web": {"host": "127.0.0.1", "port": 0}, "mcu": {"firmware": firmware}}
+        settings = load_profile(None, overrides)
         self.ctx = NodeContext(Bus(clock), clock, settings)
         self.ctx.resources[PORT_RESOURCE] = port
         self.nodes: list[Any] = []
@@ -225,7 +243,7 @@ async def _login(url: str, password: str) -> str:
 
 async def _teleop_case(case: str, robot: RobotSide, speed: float, clients: _ClientThread,
                        password: str) -> dict[str, Any]:
-    stack = Stack(robot.port)
+    stack = Stack(robot.port, robot.dialect)
     bridge, web = await stack.start()
     try:
         op = Operator(clients, web.url.replace("http://", "ws://"), await _login(web.url, password))
@@ -260,7 +278,7 @@ async def _navigator_silent(robot: RobotSide, speed: float) -> dict[str, Any]:
     from sage_robot.core import topics
     from sage_robot.core.msgs import Twist
 
-    stack = Stack(robot.port)
+    stack = Stack(robot.port, robot.dialect)
     await stack.start()
     try:
         t_end, last = time.monotonic() + DRIVE_S, 0.0
@@ -307,21 +325,20 @@ asyncio.run(main())
 
 async def _process_fault(robot: RobotSide, speed: float, supervised: bool, sig: int) -> dict[str, Any]:
     """SAGE's process (bridge + publisher) gets ``sig`` (SIGKILL, SIGSTOP) mid-drive."""
-    cmd = [sys.executable, "-c", CHILD, robot.port, str(speed)]
+    cmd = [sys.executable, "-c", CHILD, robot.port, str(speed), robot.dialect]
     if supervised:
         cmd = [sys.executable, "-m", "sage_robot.app.supervisor", "--announce",
-               "--firmware", "documented", "--port", robot.port,
-               "--", *cmd]
+               "--firmware", robot.dialect, "--port", robot.port, "--", *cmd]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     child_pid, last = proc.pid, 0.0
     try:
         assert proc.stdout is not None
+        if supervised:  # its first line names the child
+            child_pid = int((await asyncio.to_thread(proc.stdout.readline)).split()[1])
         t_ready = time.monotonic() + CHILD_READY_S
         while time.monotonic() < t_ready and robot.speed() < 0.95 * speed:
             line = await asyncio.to_thread(proc.stdout.readline)
-            if line.startswith("child "):
-                child_pid = int(line.split()[1])
-            elif line.strip():
+            if line.strip():
                 last = float(line)
         t_end = time.monotonic() + DRIVE_S / 2  # at speed: drive on a little
         while time.monotonic() < t_end:
@@ -379,19 +396,23 @@ async def _main(args: argparse.Namespace) -> dict[str, Any]:
         from sage_robot.core.errors import SageError
 
         raise SageError(f"unknown case(s) {', '.join(unknown)}; cases: {', '.join(CASES)}")
-    robot = RobotSide()
+    robot = RobotSide(args.firmware)
     robot.start()
     clients = _ClientThread()
     results: dict[str, Any] = {}
     try:
         for case in cases:
-            runs = [await _one(case, robot, args, clients, password) for _ in range(args.repeats)]
+            runs = []
+            for _ in range(args.repeats):
+                runs.append(await _one(case, robot, args, clients, password))
+                await robot.reset()
             results[case] = _worst(runs)
     finally:
         clients.close()
         robot.close()
     return {
         "bench": "safety",
+        "firmware": args.firmware,
         "speed_mps": args.speed,
         "repeats": args.repeats,
         "targets": {"zero_on_wire_s": TARGET_ZERO_S, "stop_to_rest_s": TARGET_REST_S},

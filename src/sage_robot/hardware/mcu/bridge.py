@@ -77,13 +77,13 @@ class SerialBridgeNode(Node):
     async def setup(self) -> None:
         self.mcu = self.settings.mcu
         self.dialect = dialect(self.mcu.firmware)
-        self.align = AlignmentWatch() if self.dialect.block_aligned else None
         self.banner = BannerWatch()
         self._rebooted = threading.Event()  # the RX thread saw a boot banner
         self._odom_twist: tuple[float, float] | None = None  # latest ODOM (v, w), from the RX thread
         self._realign_pending = False
         robot = self.settings.robot
         self._limits = (robot.max_linear_mps, robot.max_angular_radps, robot.allow_reverse)
+        self.align = AlignmentWatch(limits=self._limits) if self.dialect.block_aligned else None
         self.decoder = proto.Decoder(accept=FROM_MCU)
         self._port: Any = None
         self.port_path = ""
@@ -104,6 +104,7 @@ class SerialBridgeNode(Node):
         self.calibrator = ImuCalibrator(self.mcu.imu_calibration_s) if self.mcu.imu_enabled else None
         self._moved_logged_at: float | None = None
         self._timeout_logged_at = -TIMEOUT_LOG_EVERY_S
+        self._logged_at: dict[str, float] = {}
         self.bus.declare(topics.ODOM, Odometry)
         self.bus.declare(topics.BATTERY, BatteryState)
         self.bus.declare(topics.IMU, Imu)
@@ -174,8 +175,23 @@ class SerialBridgeNode(Node):
             self._write(*self.command)
         elif action == "stop":
             self.counters["stop_repeats"] += 1
-            self.log.warning("still moving after a stop: stop sent again")
             self._write(0.0, 0.0)
+            if self.align.runaways > self.counters["runaways"]:  # a new runaway: say it once
+                self.counters["runaways"] = self.align.runaways
+                self.log.error("the robot moves beyond every command SAGE sends (a wild command on "
+                               "the MCU): stop sent; if it keeps moving, cut the motor power")
+                self._event("mcu_runaway", "the robot moves faster than commanded: stopping; "
+                            "if it does not stop, use the hardware e-stop")
+            elif self._log_due("stop_repeat"):
+                self.log.warning("still moving after a stop: stop sent again")
+
+    def _log_due(self, key: str) -> bool:
+        """True at most every TIMEOUT_LOG_EVERY_S per key (repeated warnings)."""
+        now = self.clock.now()
+        if now - self._logged_at.get(key, -TIMEOUT_LOG_EVERY_S) < TIMEOUT_LOG_EVERY_S:
+            return False
+        self._logged_at[key] = now
+        return True
 
     def _beat(self) -> None:
         assert self._beat_fd is not None

@@ -14,7 +14,8 @@ and in what the firmware does on its own (docs/mcu.md has them side by side):
 
 For ``seed-2025`` the command writer guarantees that a misaligned firmware can never read
 a header inside a payload: no payload byte is ever ``0x78`` (a float whose bytes hold one
-is nudged by its last bit toward zero, at most a few 1e-8 m/s). A stop is written as a
+is moved toward zero to the nearest float without it: by its last bit when the low byte
+holds it, at most 0.8 % when a higher byte does). A stop is written as a
 *stop burst*: nine copies of the stop command each followed by one filler byte. Whatever
 the firmware's alignment, exactly one copy starts a block, so the stop is applied; and the
 burst is ten blocks long, so the alignment afterwards is what it was before. One filler
@@ -26,8 +27,6 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 from typing import Literal
-
-import numpy as np
 
 from sage_robot.core.errors import ConfigError
 from sage_robot.hardware.mcu import protocol as proto
@@ -43,13 +42,15 @@ DialectName = Literal["seed-2025", "documented"]
 
 
 def _without_header_byte(value: float) -> float:
-    """``value`` as float32, nudged toward zero by its last bit until none of its 4 bytes
-    is the seed-2025 header (0x78)."""
-    f = np.float32(value)
-    zero = np.float32(0.0)
-    while SEED_CMD_HEADER in f.tobytes():
-        f = np.nextafter(f, zero, dtype=np.float32)
-    return float(f)
+    """``value`` as float32 moved toward zero to the nearest float none of whose 4 bytes is
+    the seed-2025 header (0x78): where a byte is 0x78 it becomes 0x77 and every byte below
+    it 0xFF. A low byte costs one last-bit step; the mantissa's top byte at most 0.8 %."""
+    raw = bytearray(struct.pack("<f", value))
+    for k in range(3, -1, -1):  # the most significant first: the lower bytes are then 0xFF
+        if raw[k] == SEED_CMD_HEADER:
+            raw[k] = SEED_CMD_HEADER - 1
+            raw[:k] = b"\xff" * k
+    return float(struct.unpack("<f", bytes(raw))[0])
 
 
 @dataclass(frozen=True)
