@@ -76,8 +76,9 @@ def hand_drawn_map() -> OccupancyGrid:
 class SimRobot:
     """The running system; test code calls into its loop thread-safely."""
 
-    def __init__(self, tmp: Path, *, with_converse: bool = True) -> None:
+    def __init__(self, tmp: Path, *, with_converse: bool = True, mcu: dict[str, Any] | None = None) -> None:
         self.tmp = tmp
+        self.mcu = mcu or {}  # profile overrides of the mcu section (e.g. the firmware dialect)
         self.with_converse = with_converse
         self.loop = asyncio.new_event_loop()
         self.ready = threading.Event()
@@ -126,6 +127,7 @@ class SimRobot:
                 "web": {"host": "127.0.0.1", "port": 0},
                 "nav": {"waypoints": str(waypoints)},
                 "sim": {"speed": 1.0},
+                **({"mcu": self.mcu} if self.mcu else {}),
             },
         )
         self.ctx = make_context(settings, simulated=True)
