@@ -20,7 +20,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from sage_robot.bench.safety import CHILD
+from sage_robot.bench.safety_rig import CHILD
 from sage_robot.sim.firmware import FirmwareModel, Seed2025Model
 from sage_robot.sim.mcu_pty import PtyMcu
 

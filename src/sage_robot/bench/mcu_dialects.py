@@ -77,7 +77,8 @@ def _stream_case(speech: Any, receiver_name: str, commands: list[tuple[float, fl
 
 
 async def _timing(dialect: str) -> dict[str, Any]:
-    from sage_robot.bench.safety import RobotSide, _navigator_silent, _process_fault
+    from sage_robot.bench.safety import _navigator_silent, _process_fault
+    from sage_robot.bench.safety_rig import RobotSide
 
     robot = RobotSide(dialect)
     robot.start()
