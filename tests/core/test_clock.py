@@ -59,3 +59,38 @@ async def test_a_paced_simulation_that_falls_behind_slows_down_instead_of_bursti
     after = [w for t, w in walls if t > stall_at + 1e-9]
     # without the stall's 0.5 s being caught up, the 14 steps after it take their 0.28 s
     assert after[-1] - after[0] >= 0.2
+
+
+async def test_simulated_time_waits_for_offloaded_work():
+    """Lockstep: however long a job takes on this machine, the code that offloaded it goes
+    on at the simulated time it started, and the run advances only after it."""
+    clock = SimClock()
+    seen: list[tuple[float, float]] = []
+
+    def slow(x: float) -> float:
+        time.sleep(0.2)  # a planner on a busy machine
+        return x * 2
+
+    async def node() -> None:
+        await clock.sleep(1.0)
+        started = clock.now()
+        result = await clock.offload(slow, 21.0)
+        seen.append((started, clock.now()))
+        assert result == 42.0
+
+    stop = asyncio.Event()
+    task = asyncio.get_running_loop().create_task(node())
+    await asyncio.wait_for(clock.run(0.05, None, until=3.0, stop=stop), 10)
+    await asyncio.wait_for(task, 1)
+    (started, after), = seen
+    assert started == after == 1.0  # no simulated time passed during 0.2 s of wall time
+    assert clock.offloaded == 1
+
+
+async def test_the_wall_clock_offloads_to_a_thread():
+    import threading
+
+    from sage_robot.core.clock import WallClock
+
+    main = threading.get_ident()
+    assert await WallClock().offload(threading.get_ident) != main

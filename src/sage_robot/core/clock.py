@@ -66,6 +66,12 @@ class Clock(ABC):
         """Call ``callback`` (sync or async) every ``period`` seconds of this clock."""
         return Timer(self, period, callback, name)
 
+    async def offload(self, fn: Callable[..., T], *args: Any) -> T:
+        """``fn(*args)`` in a worker thread (CPU work that releases the GIL: numpy, models),
+        so the event loop goes on. Nodes use this, never ``asyncio.to_thread``: on a
+        simulated clock, simulated time does not pass while the job runs."""
+        return await asyncio.to_thread(fn, *args)
+
 
 class WallClock(Clock):
     """Real time. ``now()`` is the epoch time; sleeps use the monotonic clock."""
@@ -93,6 +99,31 @@ class SimClock(Clock):
         self._now = start
         self._waiters: list[tuple[float, int, asyncio.Future[None]]] = []
         self._seq = itertools.count()
+        self._jobs = 0  # offloaded jobs running now: time waits for them
+        self._jobs_done: asyncio.Event | None = None
+        self.offloaded = 0  # jobs run so far
+
+    async def offload(self, fn: Callable[..., T], *args: Any) -> T:
+        """As :meth:`Clock.offload`; the next step of simulated time waits until the job is
+        done and its caller has taken the result (lockstep), so a run does not depend on
+        how long the job took on this machine."""
+        self._jobs += 1
+        self.offloaded += 1
+        try:
+            return await asyncio.to_thread(fn, *args)
+        finally:
+            self._jobs -= 1
+            if self._jobs == 0 and self._jobs_done is not None:
+                self._jobs_done.set()
+
+    async def _wait_for_jobs(self) -> None:
+        while self._jobs:
+            if self._jobs_done is None:
+                self._jobs_done = asyncio.Event()
+            self._jobs_done.clear()
+            await self._jobs_done.wait()
+            for _ in range(SETTLE_ROUNDS):  # the callers go on from their results first
+                await asyncio.sleep(0)
 
     def now(self) -> float:
         return self._now
@@ -124,6 +155,7 @@ class SimClock(Clock):
         await self._step_to(self._now + dt)
 
     async def _step_to(self, t: float) -> None:
+        await self._wait_for_jobs()
         self.advance_to(t)
         for _ in range(SETTLE_ROUNDS):
             await asyncio.sleep(0)

@@ -27,7 +27,6 @@ worker thread.
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -151,7 +150,7 @@ class GoalRun:
                 cm.refresh()
 
         try:
-            result = await asyncio.to_thread(work)
+            result = await self.clock.offload(work)
         except NoPath as exc:
             raise Blocked(str(exc)) from None
         node.publish_plan(result.points)
@@ -294,7 +293,7 @@ class GoalRun:
         while self.clock.now() - t0 < wait_s:
             await self.clock.sleep(WATCH_PERIOD_S)
             self._waited_s = before + self.clock.now() - t0
-            if await asyncio.to_thread(self._path_free, intended.points):
+            if await self.clock.offload(self._path_free, intended.points):
                 node.event("path_clear", "thank you", place=self.target.name)
                 self._cleared = True
                 return

@@ -50,9 +50,9 @@ class LocalizationNode(Node):
         """Where global localization may look (~0.3 s of CPU) and the scan matcher's distance
         field (~1.5 s on the shipped map), worked out after start-up so the node is running
         (and tracking from its initial place) meanwhile."""
-        await asyncio.to_thread(lambda: self.pf.region)
+        await self.clock.offload(lambda: self.pf.region)
         if self.settings.nav.refine_pose:
-            self._sdf = await asyncio.to_thread(SignedDistanceField, self.data.grid)
+            self._sdf = await self.clock.offload(SignedDistanceField, self.data.grid)
 
     async def setup(self) -> None:
         nav, lidar = self.settings.nav, self.settings.robot.lidar
@@ -79,7 +79,7 @@ class LocalizationNode(Node):
         else:
             p = self.data.places.get(nav.initial_place).pose
             self.pf.set_pose(p.x, p.y, p.theta)
-        self._cloud = await asyncio.to_thread(self._cloud_stats)
+        self._cloud = await self.clock.offload(self._cloud_stats)
         self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=50)
         if self._ekf is not None:
             self.subscribe(topics.IMU, Imu, self._on_imu, maxsize=50)
@@ -112,7 +112,7 @@ class LocalizationNode(Node):
             self.pf.set_pose(msg.pose.x, msg.pose.y, msg.pose.theta, sxy, syaw)
             self.pf._odom_ref = None
             self._fix = None
-            self._cloud = await asyncio.to_thread(self._cloud_stats)
+            self._cloud = await self.clock.offload(self._cloud_stats)
             self._scores.clear()
             self._forced = FORCED_UPDATES_AFTER_RESET
         self.log.info("initial pose set", x=round(msg.pose.x, 2), y=round(msg.pose.y, 2))
@@ -135,8 +135,8 @@ class LocalizationNode(Node):
         async with self._lock:
             if self._global_pending:
                 self._global_pending = False
-                await asyncio.to_thread(self.pf.global_localization, (angles, ranges, scan.range_max))
-                self._cloud = await asyncio.to_thread(self._cloud_stats)
+                await self.clock.offload(self.pf.global_localization, (angles, ranges, scan.range_max))
+                self._cloud = await self.clock.offload(self._cloud_stats)
                 self._forced, self._scores = FORCED_UPDATES_AFTER_RESET, deque(maxlen=HEALTH_WINDOW)
                 self._fix = None
                 self.log.info("global localization started", particles=self.pf.count)
@@ -144,14 +144,15 @@ class LocalizationNode(Node):
             force = self._forced > 0 and now - self._last_forced >= FORCED_UPDATE_PERIOD_S
             if force or self.pf.moved_enough(odom):
                 t0 = asyncio.get_running_loop().time()
-                updated = await asyncio.to_thread(self.pf.update, odom, angles, ranges, scan.range_max, force)
+                updated = await self.clock.offload(self.pf.update, odom, angles, ranges, scan.range_max,
+                                                   force)
                 self.update_times.append(asyncio.get_running_loop().time() - t0)
                 if updated and force:
                     self._forced -= 1
                     self._last_forced = now
                 if updated:
-                    self._cloud = await asyncio.to_thread(self._cloud_stats)
-                    self._fix = await asyncio.to_thread(self._refine, odom, angles, ranges, scan.range_max)
+                    self._cloud = await self.clock.offload(self._cloud_stats)
+                    self._fix = await self.clock.offload(self._refine, odom, angles, ranges, scan.range_max)
                     self._publish_pose(scan.stamp)
             pose = compose(self._fix[0], relative(self._fix[1], odom)) if self._fix else self.pf.pose_at(odom)
         self._map_pose = pose
