@@ -111,8 +111,9 @@ class SerialBridgeNode(Node):
         self.bus.declare(topics.MCU_STATUS, DiagnosticStatus)
         self.subscribe(topics.CMD_VEL, Twist, self._on_cmd_vel)
         self.every(1.0 / self.mcu.resend_hz, self._resend, "serial_bridge.resend")
-        if self.mcu.cmd_timeout_s > 0:
-            self.every(CMD_TIMEOUT_CHECK_S, self._check_timeout, "serial_bridge.cmd_timeout")
+        # The command's age and the firmware's alignment are watched on a timer of their own
+        # (also with cmd_timeout_s = 0: the alignment watch needs it).
+        self.every(CMD_TIMEOUT_CHECK_S, self._check_timeout, "serial_bridge.cmd_timeout")
         self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
         self.spawn(self._link_loop(), "serial_bridge.link")
         self._beat_fd = heartbeat_fd()
