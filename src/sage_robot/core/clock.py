@@ -101,17 +101,26 @@ class SimClock(Clock):
         self._seq = itertools.count()
         self._jobs = 0  # offloaded jobs running now: time waits for them
         self._jobs_done: asyncio.Event | None = None
+        self._last_job: asyncio.Future[None] | None = None  # released when its caller has the result
         self.offloaded = 0  # jobs run so far
 
     async def offload(self, fn: Callable[..., T], *args: Any) -> T:
         """As :meth:`Clock.offload`; the next step of simulated time waits until the job is
-        done and its caller has taken the result (lockstep), so a run does not depend on
-        how long the job took on this machine."""
+        done and its caller has taken the result (lockstep), and callers take their results
+        in the order they offloaded (not the order the threads happened to finish), so a run
+        does not depend on how long the jobs took on this machine."""
+        earlier, mine = self._last_job, asyncio.get_running_loop().create_future()
+        self._last_job = mine
         self._jobs += 1
         self.offloaded += 1
         try:
-            return await asyncio.to_thread(fn, *args)
+            result = await asyncio.to_thread(fn, *args)
+            if earlier is not None:
+                await asyncio.shield(earlier)
+            return result
         finally:
+            if not mine.done():
+                mine.set_result(None)
             self._jobs -= 1
             if self._jobs == 0 and self._jobs_done is not None:
                 self._jobs_done.set()

@@ -44,6 +44,7 @@ from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_head
 from sage_robot.nav.planner import NoPath, Plan, path_blocked, plan
 
 if TYPE_CHECKING:
+    from sage_robot.nav.costmap import Costmap
     from sage_robot.nav.navigator import NavigatorNode
 
 LOCALIZED_WAIT_S = 10.0  # wait this long for a first pose before giving up
@@ -125,11 +126,12 @@ class GoalRun:
     async def _plan(self, with_obstacles: bool = True) -> Plan:
         node, start = self.node, self.pose()
         goal = self.target.pose[:2]
+        scan = node.scan  # the job's inputs are taken here, not read from the node in the thread
 
         def work() -> Plan:
             cm = node.global_cm
             if with_obstacles:
-                node.refresh_global()
+                node.refresh_global(start, scan)
                 try:
                     return plan(cm, start[:2], goal)
                 except NoPath:
@@ -293,12 +295,14 @@ class GoalRun:
         while self.clock.now() - t0 < wait_s:
             await self.clock.sleep(WATCH_PERIOD_S)
             self._waited_s = before + self.clock.now() - t0
-            if await self.clock.offload(self._path_free, intended.points):
+            if await self.clock.offload(self._path_free, intended.points, self.node.pose(),
+                                        self.node.scan, self.node.local_cm):
                 node.event("path_clear", "thank you", place=self.target.name)
                 self._cleared = True
                 return
 
-    def _path_free(self, points: np.ndarray) -> bool:
+    def _path_free(self, points: np.ndarray, pose: tuple[float, float, float] | None, scan: Any,
+                   local: Costmap | None) -> bool:
         """Whether the intended path, from the robot on, is free in the global costmap as the
         latest scan shows it, and the controller's forward check on the local costmap would let
         the robot start. Runs in a worker thread.
@@ -307,17 +311,15 @@ class GoalRun:
         lines, so a passer-by marked between two of them (beams 1 degree apart are 5 cm apart
         at 3 m) would never be cleared and would hold the robot for the whole wait."""
         node = self.node
-        pose = node.pose()
         if pose is None:
             return False
         node.global_cm.clear_obstacles()
-        node.refresh_global()
+        node.refresh_global(pose, scan)
         d = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
         ahead = points[int(np.argmin(d)):]
         ahead = ahead[np.hypot(ahead[:, 0] - pose[0], ahead[:, 1] - pose[1]) > self.params.xy_tolerance_m]
         if path_blocked(node.global_cm, ahead, WATCH_AHEAD_M):
             return False
-        local = node.local_cm
         return len(ahead) < 2 or local is None or \
             not PurePursuit(ahead, self.params, self.target.pose[2]).step(pose, local).blocked
 

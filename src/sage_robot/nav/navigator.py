@@ -148,9 +148,9 @@ class NavigatorNode(Node):
         poses = tuple(Pose2D(float(x), float(y), 0.0) for x, y in points[::4])
         self.bus.publish(topics.PLAN, PathMsg(self.clock.now(), "map", poses))
 
-    def refresh_global(self) -> None:
-        """Mark the latest scan into the global costmap (runs in the planning thread)."""
-        pose, scan = self.pose(), self.scan
+    def refresh_global(self, pose: Pose | None, scan: LaserScan | None) -> None:
+        """Mark ``scan``, taken at ``pose``, into the global costmap (runs in the planning
+        thread: its inputs are taken on the event loop before, never read from here)."""
         if pose is not None and scan is not None:
             self.global_cm.update_scan(self.sensor_pose(pose), scan.angles, scan.ranges, scan.range_max,
                                        forget_beyond_m=GLOBAL_OBSTACLE_MEMORY_M)

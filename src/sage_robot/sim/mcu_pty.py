@@ -14,7 +14,9 @@ removes the directories of this user whose owner PID is no longer alive.
 
 from __future__ import annotations
 
+import array
 import contextlib
+import fcntl
 import logging
 import os
 import re
@@ -22,6 +24,7 @@ import shutil
 import stat
 import tempfile
 import termios
+import time
 import tty
 from pathlib import Path
 from typing import Any
@@ -35,6 +38,8 @@ from sage_robot.sim.flat_floor import FlatFloor, SimBody
 BAUD = termios.B115200
 READ_CHUNK = 4096  # bytes read from the master per call
 FLUSH_BYTES = 256  # write at once when this much waits (ODOM off, e.g. a test's own frames)
+LOCKSTEP_WAIT_S = 1.0  # lockstep: longest wait for the kernel to hand written bytes over (wall s)
+LOCKSTEP_POLL_S = 0.0001  # ... looking this often (wall s)
 LINK_NAME = "ttySIM0"
 PORT_RESOURCE = "mcu_port"  # ctx.resources key the serial bridge reads
 WORLD_RESOURCE = "sim_world"  # ctx.resources key of the simulated world, when there is one
@@ -110,8 +115,11 @@ class PtyMcu:
     """A pty pair with the firmware model on the master side. ``base``: where the link's
     directory goes (default :func:`runtime_dir`; stale ones there are removed first)."""
 
-    def __init__(self, firmware: SimFirmware, base: Path | None = None) -> None:
+    def __init__(self, firmware: SimFirmware, base: Path | None = None, lockstep: bool = False) -> None:
         self.firmware = firmware
+        # lockstep (a simulated clock): each write is readable on the Jetson side before pump()
+        # returns, so the bridge reads it at the same simulated time on every run.
+        self.lockstep = lockstep
         base = base if base is not None else runtime_dir()
         if base is not None:
             remove_stale_links(base)
@@ -167,12 +175,31 @@ class PtyMcu:
         # ~115 bytes take on the real 115200-baud wire anyway.
         if self._pending and (fw.frames_sent["ODOM"] != odom_before or len(self._pending) >= FLUSH_BYTES):
             out, self._pending = bytes(self._pending), bytearray()
+            before = self._readable() if self.lockstep else 0
             try:
                 written = os.write(self.master_fd, out)
             except (BlockingIOError, OSError):  # nobody reads: the buffer is full
                 written = 0
+            if self.lockstep and written:
+                self._wait_readable(before + written)
             self.bytes_dropped += len(out) - written
             self.writes += 1
+
+    def _readable(self) -> int:
+        """Bytes waiting on the Jetson side of the pty (FIONREAD)."""
+        buf = array.array("i", [0])
+        try:
+            fcntl.ioctl(self._slave_fd, termios.FIONREAD, buf, True)
+        except OSError:
+            return 0
+        return int(buf[0])
+
+    def _wait_readable(self, count: int) -> None:
+        """The kernel hands pty bytes over in a worker of its own: wait (bounded) until they
+        are readable, so that a read in this simulated step finds them all."""
+        deadline = time.monotonic() + LOCKSTEP_WAIT_S
+        while self._readable() < count and time.monotonic() < deadline:
+            time.sleep(LOCKSTEP_POLL_S)
 
     def inject(self, data: bytes) -> None:
         """Write raw bytes toward the Jetson (tests: corrupt the line)."""
@@ -226,7 +253,7 @@ class McuSimNode(Node):
                 firmware=dialect, firmware_track_m=fw_track, body_track_m=robot.track_width_m,
             )
         self.floor = FlatFloor(robot.track_width_m)
-        self.pty = PtyMcu(self.firmware)
+        self.pty = PtyMcu(self.firmware, lockstep=self.clock.is_simulated)
         self.ctx.resources[PORT_RESOURCE] = self.pty.port_name
         self.ctx.resources[MCU_SIM_RESOURCE] = self
         self._hooks: list[Any] = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])

@@ -185,7 +185,7 @@ class VoiceNode(Node):
             return
         xvf = XVF3800Doa()
         try:
-            await asyncio.to_thread(xvf.open)
+            await self.clock.offload(xvf.open)
             self._xvf, self.doa_source = xvf, xvf.source
         except DeviceNotConnectedError as exc:
             self.log.warning("no DOA device; the face looks straight ahead", reason=str(exc))
@@ -197,7 +197,7 @@ class VoiceNode(Node):
     async def _publish_doa(self) -> None:
         if self._xvf is not None:
             try:
-                self.doa_angle = await asyncio.to_thread(self._xvf.read_deg)
+                self.doa_angle = await self.clock.offload(self._xvf.read_deg)
             except DeviceNotConnectedError as exc:
                 self.log.warning("DOA device lost", reason=str(exc))
                 self._xvf, self.doa_source, self.doa_angle = None, "fixed", FRONT_DEG
@@ -206,7 +206,7 @@ class VoiceNode(Node):
     async def _visitor_says(self, msg: Text) -> None:
         """Simulation: render ``msg`` with the robot's TTS and speak it into the sim mic."""
         speech = self.models.speech
-        pcm = await asyncio.to_thread(speech.synthesize, msg.data)
+        pcm = await self.clock.offload(speech.synthesize, msg.data)
         self._mic.inject(resample(pcm, speech.sample_rate, SAMPLE_RATE))
 
     def _visitor_audio(self, msg: AudioChunk) -> None:

@@ -176,7 +176,7 @@ class VoicePipeline:
     async def process_frame(self, frame: np.ndarray) -> None:
         # When the frame was captured (a mic that lags still gets its echo right).
         frame_t = getattr(self.mic, "frame_time", None) or self.clock.now()
-        detections, prob = await asyncio.to_thread(self._analyse, frame)
+        detections, prob = await self.clock.offload(self._analyse, frame)
         detections = [d for d in detections if not self._own_voice(d, frame_t)]
         if detections:
             self._on_wake(detections[0])
@@ -213,7 +213,7 @@ class VoicePipeline:
     async def _partial(self, pcm: np.ndarray, listen_id: int) -> None:
         assert self.partial_stt is not None
         try:
-            transcript = await asyncio.to_thread(self.partial_stt.transcribe, pcm, True)
+            transcript = await self.clock.offload(self.partial_stt.transcribe, pcm, True)
         except Exception as exc:  # a partial is only for show: the final still runs
             self.log.warning("partial transcript failed", error=str(exc))
             return
@@ -231,7 +231,7 @@ class VoicePipeline:
             self._early = None  # the visitor spoke again
         if self._early is None and rec.silent_s >= EARLY_STT_S:
             pcm = rec.snapshot()
-            fut = asyncio.ensure_future(asyncio.to_thread(self.stt.transcribe, pcm, True))
+            fut = asyncio.ensure_future(self.clock.offload(self.stt.transcribe, pcm, True))
             fut.add_done_callback(lambda f: f.cancelled() or f.exception())  # dropped: no warning
             self._early = (rec.speech_s, fut)
 
@@ -304,7 +304,7 @@ class VoicePipeline:
             if early is not None:
                 transcript = await early
             else:
-                transcript = await asyncio.to_thread(self.stt.transcribe, utt.pcm, True)
+                transcript = await self.clock.offload(self.stt.transcribe, utt.pcm, True)
             times.stt_done = self.clock.now()
             times.transcript = transcript.text
             self.log.info("heard", text=transcript.text, reason=utt.reason.value,

@@ -87,7 +87,7 @@ class Mouth:
             try:
                 if self.reference is not None:  # a detector scores best after some silence
                     silence = np.zeros(round(REFERENCE_PRIME_S * SAMPLE_RATE), dtype=np.int16)
-                    await asyncio.to_thread(self.reference.feed, silence)
+                    await self.clock.offload(self.reference.feed, silence)
                 while (item := await queue.get()) is not None:
                     pcm, rate = item
                     await self._play(pcm, rate, on_first_audio if first else None)
@@ -127,7 +127,7 @@ class Mouth:
                     parts = [*first_clause(parts[0]), *parts[1:]]
                 first = False
                 for sentence in parts:
-                    pcm = await asyncio.to_thread(self.speech.engine.synthesize_sentence, sentence)
+                    pcm = await self.clock.offload(self.speech.engine.synthesize_sentence, sentence)
                     if len(pcm):
                         await queue.put((pcm, self.speech.sample_rate))
         finally:
@@ -147,7 +147,7 @@ class Mouth:
             self._play_end = start + len(block) / rate
             self._remember(start, self._play_end)
             if self.reference is not None:
-                await asyncio.to_thread(self._hear_self, block, rate, start)
+                await self.clock.offload(self._hear_self, block, rate, start)
             if on_first is not None:
                 on_first()
                 on_first = None

@@ -67,6 +67,7 @@ CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
 TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
 LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
 STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
+SIM_RX_POLL_S = 0.005  # on a simulated clock the port is read in the loop this often (clock s)
 RX_JOIN_TIMEOUT_S = 1.0  # the RX thread wakes every READ_TIMEOUT_S, so this is ample
 FROM_MCU = frozenset(t.code for t in proto.FRAME_TYPES.values() if t.direction is proto.Direction.FROM_MCU)
 
@@ -116,6 +117,8 @@ class SerialBridgeNode(Node):
         self.every(CMD_TIMEOUT_CHECK_S, self._check_timeout, "serial_bridge.cmd_timeout")
         self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
         self.spawn(self._link_loop(), "serial_bridge.link")
+        if self.clock.is_simulated:  # no RX thread: reads at fixed simulated times (deterministic)
+            self.every(SIM_RX_POLL_S, self._poll_rx, "serial_bridge.rx")
         self._beat_fd = heartbeat_fd()
         if self._beat_fd is not None:  # run by the supervisor: tell it this bridge is alive
             os.set_blocking(self._beat_fd, False)
@@ -248,10 +251,11 @@ class SerialBridgeNode(Node):
             self.align.reset()
         self._lost.clear()
         self._rx_stop = threading.Event()
-        self._rx_thread = threading.Thread(
-            target=self._rx_loop, args=(port, self._rx_stop), name="serial_bridge.rx", daemon=True
-        )
-        self._rx_thread.start()
+        if not self.clock.is_simulated:
+            self._rx_thread = threading.Thread(
+                target=self._rx_loop, args=(port, self._rx_stop), name="serial_bridge.rx", daemon=True
+            )
+            self._rx_thread.start()
         self.log.info("MCU link up", port=path, baud=self.mcu.baud)
         if self.counters["reconnects"]:
             self._event("mcu_reconnected", f"MCU link back on {path}")
@@ -301,13 +305,29 @@ class SerialBridgeNode(Node):
             while not stop.is_set():
                 data = port.read(port.in_waiting or 1)
                 if data:
-                    if self.banner.feed(data):
-                        self._rebooted.set()
-                    for frame in self.decoder.feed(data):
-                        self._on_frame(frame)
+                    self._on_bytes(data)
         except Exception as exc:  # SerialException/OSError on unplug; anything else too
             if not stop.is_set():
                 self._mark_lost(f"{type(exc).__name__}: {exc}")
+
+    def _poll_rx(self) -> None:
+        """Simulated clock: read what the port holds, in the loop (the simulator's pty makes
+        every byte of a step readable before the step ends)."""
+        port = self._port
+        if port is None or self._lost.is_set():
+            return
+        try:
+            waiting = port.in_waiting
+            if waiting:
+                self._on_bytes(port.read(waiting))
+        except Exception as exc:  # SerialException/OSError on unplug
+            self._mark_lost(f"{type(exc).__name__}: {exc}")
+
+    def _on_bytes(self, data: bytes) -> None:
+        if self.banner.feed(data):
+            self._rebooted.set()
+        for frame in self.decoder.feed(data):
+            self._on_frame(frame)
 
     def _on_frame(self, frame: proto.Frame) -> None:
         now = self.clock.now()
