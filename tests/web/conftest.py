@@ -224,13 +224,14 @@ class SimRobot:
         return self.launcher.nodes["web"]
 
 
-@pytest.fixture(scope="module")
-def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimRobot]:
-    tmp = tmp_path_factory.mktemp("web")
+@contextlib.contextmanager
+def sim_robot(tmp_path_factory: pytest.TempPathFactory, name: str, **kw: Any) -> Iterator[SimRobot]:
+    """A started :class:`SimRobot` with the test operator password and its own state folder."""
+    tmp = tmp_path_factory.mktemp(name)
     old = {k: os.environ.get(k) for k in ("SAGE_OPERATOR_PASSWORD", "SAGE_STATE_DIR")}
     os.environ["SAGE_OPERATOR_PASSWORD"] = PASSWORD
     os.environ["SAGE_STATE_DIR"] = str(tmp / "state")
-    sim = SimRobot(tmp).start()
+    sim = SimRobot(tmp, **kw).start()
     try:
         yield sim
     finally:
@@ -240,6 +241,12 @@ def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimRobot]:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+@pytest.fixture(scope="module")
+def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimRobot]:
+    with sim_robot(tmp_path_factory, "web") as sim:
+        yield sim
 
 
 @pytest.fixture(scope="module")

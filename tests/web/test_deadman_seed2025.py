@@ -5,7 +5,6 @@ documented firmware: test_protocol.py.)"""
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -14,27 +13,15 @@ import httpx
 import pytest
 from websockets.sync.client import connect
 
-from .conftest import PASSWORD, SimRobot
+from .conftest import SimRobot, sim_robot
 
 WAIT_S = 5.0
 
 
 @pytest.fixture(scope="module")
 def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimRobot]:
-    tmp = tmp_path_factory.mktemp("web-seed")
-    old = {k: os.environ.get(k) for k in ("SAGE_OPERATOR_PASSWORD", "SAGE_STATE_DIR")}
-    os.environ["SAGE_OPERATOR_PASSWORD"] = PASSWORD
-    os.environ["SAGE_STATE_DIR"] = str(tmp / "state")
-    sim = SimRobot(tmp, mcu={"firmware": "seed-2025"}).start()
-    try:
+    with sim_robot(tmp_path_factory, "web-seed", mcu={"firmware": "seed-2025"}) as sim:
         yield sim
-    finally:
-        sim.stop()
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
 
 
 @pytest.fixture(scope="module")
