@@ -36,6 +36,8 @@ from sage_robot.core.msgs.nav import (
 from sage_robot.core.paths import package_data
 from sage_robot.core.places import Places, load_places
 
+from ..support.waits import until as support_until
+
 WAIT_S = 5.0  # every wait in these tests is bounded by this
 
 CORPUS = [
@@ -191,9 +193,4 @@ def make_tools(bus: Bus, settings: Settings, fallback: Any = None) -> ToolRegist
 
 async def until(predicate: Any, timeout: float = WAIT_S) -> None:
     """Wait (bounded) until ``predicate()`` is true."""
-
-    async def poll() -> None:
-        while not predicate():
-            await asyncio.sleep(0.005)
-
-    await asyncio.wait_for(poll(), timeout)
+    await support_until(predicate, timeout=timeout)

@@ -29,7 +29,8 @@ def test_relevance_uses_similarity_title_and_section() -> None:
     q = keywords("how do I get something printed in 3D?")
     passage = Hit("Any student can submit a print: upload the STL file.", "3D Printing Lab",
                   "How to get something printed", similarity=0.3)  # fmt: skip
-    assert cover(q, passage) == 1.0 and is_relevant(q, passage)
+    assert cover(q, passage) == 1.0
+    assert is_relevant(q, passage)
     assert not is_relevant(q, Hit("Any student can submit a print.", similarity=0.1))  # one word, weak vector
     assert is_relevant(q, Hit("Nothing in common.", similarity=0.45))  # the vectors alone are sure
     rare = keywords("help with calculus homework")
@@ -71,4 +72,5 @@ async def test_shipped_questions_are_answered_and_off_topic_ones_are_not(bus, se
     off_topic = yaml.safe_load(package_data("brain", "off_topic.yaml").read_text())
     for text in off_topic["development"] + off_topic["heldout"]:
         result = await brain.respond(text)
-        assert result.intent == "question" and result.reply == DONT_KNOW, (text, result.reply)
+        assert result.intent == "question", (text, result.reply)
+        assert result.reply == DONT_KNOW, (text, result.reply)

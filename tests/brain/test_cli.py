@@ -27,7 +27,9 @@ def ask(capsys, *argv: str) -> tuple[int, str, str]:
 def test_ask_json_offline_reports_reply_and_tool_calls(capsys) -> None:
     rc, out, _ = ask(capsys, "take me to the clean room", "--json")
     data = json.loads(out)
-    assert rc == 0 and data["brain"] == "offline" and data["intent"] == "navigate"
+    assert rc == 0
+    assert data["brain"] == "offline"
+    assert data["intent"] == "navigate"
     assert data["tool_calls"][0]["name"] == "set_goal"
     assert data["tool_calls"][0]["result"] == {"error": "navigation is not running right now"}
     assert data["reply"] == " ".join(data["sentences"])
@@ -35,7 +37,9 @@ def test_ask_json_offline_reports_reply_and_tool_calls(capsys) -> None:
 
 def test_ask_plain_text(capsys) -> None:
     rc, out, _ = ask(capsys, "hello")
-    assert rc == 0 and out.startswith("Hello") and "{" not in out
+    assert rc == 0
+    assert out.startswith("Hello")
+    assert "{" not in out
 
 
 def test_ask_errors_are_one_line(capsys) -> None:
@@ -73,8 +77,11 @@ def test_ask_json_with_the_llm(capsys, tmp_path, threaded_server) -> None:
     profile.write_text(f"llm:\n  base_url: {threaded_server.base_url}\n  max_retries: 0\n")
     rc = main(["--profile", str(profile), "ask", "what is the cafe", "--json"])
     data = json.loads(capsys.readouterr().out)
-    assert rc == 0 and data["brain"] == "llm" and data["sentences"] == ["It is the café.", "Yum!"]
-    assert data["tool_calls"][0]["name"] == "describe_place" and data["tool_calls"][0]["ok"]
+    assert rc == 0
+    assert data["brain"] == "llm"
+    assert data["sentences"] == ["It is the café.", "Yum!"]
+    assert data["tool_calls"][0]["name"] == "describe_place"
+    assert data["tool_calls"][0]["ok"]
 
 
 def test_chat_in_a_terminal() -> None:
@@ -104,7 +111,9 @@ def test_ask_sim_starts_only_the_robot_navigation_and_kb() -> None:
     data = json.loads(proc.stdout)
     assert data["reply"] == "Sure, follow me to the Guelly Delly!"
     goal = data["tool_calls"][0]
-    assert goal["name"] == "set_goal" and goal["ok"] and goal["result"]["status"] == "navigating"
+    assert goal["name"] == "set_goal"
+    assert goal["ok"]
+    assert goal["result"]["status"] == "navigating"
     for node in ("sim_world", "mcu_sim", "serial_bridge", "map_server", "localization", "navigator", "kb"):
         assert f"node running  node={node}" in proc.stderr, node
     for node in ("voice", "web", "foxglove"):

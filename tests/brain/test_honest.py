@@ -79,14 +79,18 @@ async def test_estop_engaged_refuses_to_drive_and_released_drives() -> None:
     node = await start(bus)
     try:
         reply = await ask(bus, "take me to the cafe")
-        assert reply == ESTOP_LINE and "emergency stop" in reply and "follow me" not in reply.lower()
+        assert reply == ESTOP_LINE
+        assert "emergency stop" in reply
+        assert "follow me" not in reply.lower()
         assert "emergency stop" in await ask(bus, "give me a tour")
         assert "emergency stop" in await ask(bus, "where are you going?")
         where = await ask(bus, "where is the clean room")
-        assert "emergency stop" in where and "Shall I take you there" not in where
+        assert "emergency stop" in where
+        assert "Shall I take you there" not in where
         assert "follow me" not in (await ask(bus, "yes")).lower()
         await asyncio.sleep(0.05)
-        assert nav.goals == [] and nav.tours == []  # no goal was ever sent
+        assert nav.goals == []
+        assert nav.tours == []  # no goal was ever sent
         estop(bus, False)
         assert await ask(bus, "take me to the cafe") == "Sure, follow me to the Guelly Delly!"
         await until(lambda: nav.goals == ["GUELLY_DELLY"])
@@ -147,7 +151,8 @@ async def test_critical_battery_goes_only_to_the_dock() -> None:
         assert "docking station" in reply
         assert "nearly empty" in await ask(bus, "show me around")
         assert "nearly empty" in await ask(bus, "what are you doing")
-        assert nav.goals == [] and nav.tours == []
+        assert nav.goals == []
+        assert nav.tours == []
         assert "follow me" in (await ask(bus, "go to the docking station")).lower()
         await until(lambda: nav.goals == [DOCK])
     finally:
@@ -200,7 +205,8 @@ async def test_lost_for_a_second_refuses_and_says_so() -> None:
         bus.publish(topics.LOC_HEALTH, LocalizationHealth(clock.now(), 0.1, True))
         await settle()
         reply = await ask(bus, "take me to the clean room")
-        assert "lost track of where I am" in reply and "follow me" not in reply.lower()
+        assert "lost track of where I am" in reply
+        assert "follow me" not in reply.lower()
         await until(lambda: nav.goals == ["GUELLY_DELLY"])
         bus.publish(topics.LOC_HEALTH, LocalizationHealth(clock.now(), 0.9, False))
         await settle()

@@ -53,11 +53,13 @@ async def test_converse_streams_sentences_as_feedback_and_returns_the_reply() ->
     node = await start(bus)
     try:
         feedback, result = await asyncio.wait_for(converse(bus, "hello"), WAIT_S)
-        assert result.ok and len(feedback) == 2
+        assert result.ok
+        assert len(feedback) == 2
         assert result.value == Text(" ".join(feedback))
         assert node.stats() == {"brain": "offline", "turns": 1}
         feedback, result = await asyncio.wait_for(converse(bus, "   "), WAIT_S)
-        assert feedback == [result.value.data] and "did not catch that" in result.value.data
+        assert feedback == [result.value.data]
+        assert "did not catch that" in result.value.data
     finally:
         await stop(node)
 
@@ -107,7 +109,8 @@ async def test_events_become_speech(kind: str, words: str) -> None:
         bus.publish(topics.EVENTS, Event(0.0, "navigator", "collision"))  # not spoken
         await until(lambda: said)
         await asyncio.sleep(0.05)
-        assert len(said) == 1 and words in said[0]
+        assert len(said) == 1
+        assert words in said[0]
     finally:
         await stop(node)
 
@@ -121,7 +124,8 @@ async def test_conversation_resets_after_idle_time() -> None:
         await asyncio.wait_for(converse(bus, "where is the clean room"), WAIT_S)
         clock.advance_to(clock.now() + 61.0)
         _, result = await asyncio.wait_for(converse(bus, "yes"), WAIT_S)
-        assert nav.goals == [] and "Guelly" not in result.value.data  # the offer was forgotten
+        assert nav.goals == []
+        assert "Guelly" not in result.value.data  # the offer was forgotten
         await asyncio.wait_for(converse(bus, "where is the clean room"), WAIT_S)
         clock.advance_to(clock.now() + 30.0)
         await asyncio.wait_for(converse(bus, "yes"), WAIT_S)

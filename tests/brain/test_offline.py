@@ -65,20 +65,25 @@ async def test_navigation_sends_one_goal_and_returns_at_once(brain, nav) -> None
     result = await asyncio.wait_for(brain.respond("Take me to the Guelly Deli", said.append), WAIT_S)
     await until(lambda: nav.goals)
     assert nav.goals == ["GUELLY_DELLY"]
-    assert said == result.sentences and "Guelly Delly" in result.reply
+    assert said == result.sentences
+    assert "Guelly Delly" in result.reply
     assert [c.name for c in result.tool_calls] == ["set_goal"]
-    assert brain.robot.nav.navigating and brain.robot.nav.target == "GUELLY_DELLY"
+    assert brain.robot.nav.navigating
+    assert brain.robot.nav.target == "GUELLY_DELLY"
 
 
 async def test_unknown_place_lists_places(brain, nav) -> None:
     result = await brain.respond("take me to the moon")
     assert nav.goals == []
-    assert "moon" in result.reply and "Bio Engineering Lab" in result.reply
+    assert "moon" in result.reply
+    assert "Bio Engineering Lab" in result.reply
 
 
 async def test_where_is_then_yes_goes_there(brain, nav) -> None:
     first = await brain.respond("where is the clean room?")
-    assert "Clean Room" in first.reply and first.reply.endswith("?") and nav.goals == []
+    assert "Clean Room" in first.reply
+    assert first.reply.endswith("?")
+    assert nav.goals == []
     await brain.respond("yes please")
     await until(lambda: nav.goals)
     assert nav.goals == ["CLEAN_ROOM"]
@@ -88,7 +93,8 @@ async def test_cancel_stops_the_running_goal(brain, nav) -> None:
     await brain.respond("go to the mechatronics lab")
     await until(lambda: nav.goals)
     result = await brain.respond("stop")
-    assert nav.cancels == 1 and "stopped" in result.reply
+    assert nav.cancels == 1
+    assert "stopped" in result.reply
     assert not brain.robot.nav.navigating
 
 
@@ -107,7 +113,8 @@ async def test_battery_from_the_last_reading(brain, bus) -> None:
 
 async def test_ip_address_is_spoken_with_dots_as_words(brain) -> None:
     result = await brain.respond("what is your i p address")
-    assert result.reply.startswith("My address is ") and " dot " in result.reply
+    assert result.reply.startswith("My address is ")
+    assert " dot " in result.reply
     assert not re.search(r"\d\.\d", result.reply)
 
 
@@ -115,7 +122,8 @@ async def test_tour_by_theme(brain, nav) -> None:
     result = await brain.respond("take me on a tour of the labs")
     await until(lambda: nav.tours)
     stops = nav.tours[0]
-    assert 2 <= len(stops) <= 8 and "BIO_ENG_LAB" in stops
+    assert 2 <= len(stops) <= 8
+    assert "BIO_ENG_LAB" in stops
     assert not {"GUELLY_DELLY", "BATHROOMS", "DOCKING_STATION", "HESSE_CENTER"} & set(stops)
     assert "stops" in result.reply
 
@@ -123,7 +131,8 @@ async def test_tour_by_theme(brain, nav) -> None:
 async def test_questions_answered_from_the_kb_trimmed_and_speakable(brain, real_kb) -> None:
     result = await brain.respond("how do I get something printed in 3D?")
     assert result.reply.startswith("Any student of the university can submit a print")
-    assert 1 <= len(result.sentences) <= 3 and "http" not in result.reply
+    assert 1 <= len(result.sentences) <= 3
+    assert "http" not in result.reply
     cleanroom = await brain.respond("What do you need to wear in the cleanroom?")
     assert "gown" in cleanroom.reply
 
@@ -174,7 +183,8 @@ async def test_describe_place_adds_the_kb_passage_about_it(brain, real_kb) -> No
         "Here is what I know about the Clean Room: controlled environment for sensitive fabrication."
     )
     assert "dust" in result.reply  # from the clean room's own KB document
-    assert result.sentences[-1] == "Would you like to go there?" and 3 <= len(result.sentences) <= 4
+    assert result.sentences[-1] == "Would you like to go there?"
+    assert 3 <= len(result.sentences) <= 4
     assert len(set(result.sentences)) == len(result.sentences)
     followed = await brain.respond("yes")
     assert followed.intent == "navigate"

@@ -27,14 +27,16 @@ def test_openai_fragments_two_calls() -> None:
         ("call_set_goal_0", "set_goal"),
         ("call_list_places_1", "list_places"),
     ]
-    assert json.loads(calls[0].arguments) == ARGS and json.loads(calls[1].arguments) == {}
+    assert json.loads(calls[0].arguments) == ARGS
+    assert json.loads(calls[1].arguments) == {}
 
 
 def test_ollama_whole_calls_all_at_index_zero() -> None:
     asm = feed_all(tool_call_chunks([("set_goal", ARGS), ("describe_place", {"name": "x"})], "ollama"))
     calls = asm.finished_calls()
     assert [c.name for c in calls] == ["set_goal", "describe_place"]
-    assert json.loads(calls[0].arguments) == ARGS and json.loads(calls[1].arguments) == {"name": "x"}
+    assert json.loads(calls[0].arguments) == ARGS
+    assert json.loads(calls[1].arguments) == {"name": "x"}
 
 
 def test_calls_without_index_or_id() -> None:
@@ -43,16 +45,18 @@ def test_calls_without_index_or_id() -> None:
         chunk({"tool_calls": [{"function": {"arguments": 'tion": "dock"}'}}]}),
     ]
     calls = feed_all(chunks).finished_calls()
-    assert (
-        len(calls) == 1 and calls[0].id == "call_0" and json.loads(calls[0].arguments) == {"location": "dock"}
-    )
+    assert len(calls) == 1
+    assert calls[0].id == "call_0"
+    assert json.loads(calls[0].arguments) == {"location": "dock"}
 
 
 def test_text_and_calls_in_one_stream() -> None:
     asm = feed_all(
         text_chunks("Let me look. ") + tool_call_chunks([("list_places", {})]) + [chunk({}, "tool_calls")]
     )
-    assert asm.text == "Let me look. " and asm.finish_reason == "tool_calls" and len(asm.calls) == 1
+    assert asm.text == "Let me look. "
+    assert asm.finish_reason == "tool_calls"
+    assert len(asm.calls) == 1
 
 
 @given(
@@ -63,4 +67,5 @@ def test_any_fragment_size_gives_the_same_arguments(size: int, args: dict) -> No
     calls = feed_all(
         tool_call_chunks([("kb_search", args), ("set_goal", ARGS)], "openai", size)
     ).finished_calls()
-    assert json.loads(calls[0].arguments) == args and json.loads(calls[1].arguments) == ARGS
+    assert json.loads(calls[0].arguments) == args
+    assert json.loads(calls[1].arguments) == ARGS

@@ -103,7 +103,8 @@ async def test_action_feedback_and_result():
     seen = [fb async for fb in handle.feedback()]
     result = await handle.result()
     assert seen == [0, 1, 2]
-    assert result.ok and result.value == "done"
+    assert result.ok
+    assert result.value == "done"
 
 
 async def test_action_cancel_preempt_and_abort():

@@ -1,6 +1,8 @@
 import asyncio
 import time
 
+import pytest
+
 from sage_robot.core.clock import SimClock
 
 
@@ -40,7 +42,7 @@ async def test_run_at_a_real_time_factor():
     wall0 = time.monotonic()
     await clock.run(step_s=0.01, speed=10.0, until=1.0)
     wall = time.monotonic() - wall0
-    assert 0.08 < wall < 1.0
+    assert 0.08 < wall < 1.0  # paced: never faster than asked (the upper bound is only 10x lenient)
 
 
 async def test_a_paced_simulation_that_falls_behind_slows_down_instead_of_bursting():
@@ -85,6 +87,54 @@ async def test_simulated_time_waits_for_offloaded_work():
     (started, after), = seen
     assert started == after == 1.0  # no simulated time passed during 0.2 s of wall time
     assert clock.offloaded == 1
+
+
+async def test_a_job_with_a_latency_lands_exactly_then_however_long_it_took():
+    """Time runs on beside a job with a latency (the world keeps moving while a plan is
+    computed) and its result is handed over at start + latency: a fast job waits for its due
+    time, a slow one holds time there; two jobs due together hand over in offload order."""
+    clock = SimClock()
+    landed: list[tuple[str, float]] = []
+    ticks: list[float] = []
+
+    def job(name: str, wall_s: float) -> str:
+        time.sleep(wall_s)
+        return name
+
+    async def caller(name: str, wall_s: float, latency_s: float) -> None:
+        await clock.sleep(1.0)
+        landed.append((await clock.offload(job, name, wall_s, latency_s=latency_s), clock.now()))
+
+    async def ticker() -> None:
+        while True:
+            await clock.sleep(0.05)
+            ticks.append(clock.now())
+
+    loop = asyncio.get_running_loop()
+    tasks = [loop.create_task(caller("slow", 0.3, 0.2)), loop.create_task(caller("fast", 0.0, 0.2)),
+             loop.create_task(caller("quick", 0.0, 0.1)), loop.create_task(ticker())]
+    await asyncio.wait_for(clock.run(0.05, None, until=2.0, stop=asyncio.Event()), 10)
+    for t in tasks:
+        t.cancel()
+    assert [name for name, _ in landed] == ["quick", "slow", "fast"]
+    assert [round(at, 6) for _, at in landed] == [1.1, 1.2, 1.2]
+    assert any(1.0 < t < 1.2 for t in ticks)  # time ran on while the jobs ran
+
+
+async def test_an_offloaded_error_reaches_the_caller_at_the_due_time():
+    clock = SimClock()
+
+    def fail() -> None:
+        raise ValueError("no path")
+
+    async def caller() -> float:
+        with pytest.raises(ValueError, match="no path"):
+            await clock.offload(fail, latency_s=0.3)
+        return clock.now()
+
+    task = asyncio.get_running_loop().create_task(caller())
+    await asyncio.wait_for(clock.run(0.1, None, until=1.0, stop=asyncio.Event()), 10)
+    assert round(await asyncio.wait_for(task, 1), 6) == 0.3
 
 
 async def test_the_wall_clock_offloads_to_a_thread():

@@ -11,8 +11,10 @@ def test_shipped_profile_loads_with_seed_defaults():
     assert s.robot.track_width_m == 0.381
     assert s.robot.radius_m == 0.25
     assert (s.robot.lidar.x_m, s.robot.lidar.z_m) == (0.1466, 0.527)
-    assert s.robot.max_linear_mps == 0.8 and s.robot.max_angular_radps == 1.0
-    assert s.mcu.baud == 115200 and s.mcu.watchdog_s == 0.55
+    assert s.robot.max_linear_mps == 0.8
+    assert s.robot.max_angular_radps == 1.0
+    assert s.mcu.baud == 115200
+    assert s.mcu.watchdog_s == 0.55
     assert s.nav.inflation_radius_m == 0.55
 
 
@@ -59,7 +61,9 @@ def test_secret_from_env_and_owner_only_key_file(tmp_path, monkeypatch):
         read_secret("SAGE_TEST_KEY", f)
     os.chmod(f, 0o600)
     secret = read_secret("SAGE_TEST_KEY", f)
-    assert secret is not None and secret.get_secret_value() == "sk-123"
-    assert "sk-123" not in repr(secret) and "sk-123" not in str(secret)
+    assert secret is not None
+    assert secret.get_secret_value() == "sk-123"
+    assert "sk-123" not in repr(secret)
+    assert "sk-123" not in str(secret)
     monkeypatch.setenv("SAGE_TEST_KEY", "from-env")
     assert read_secret("SAGE_TEST_KEY", f).get_secret_value() == "from-env"  # type: ignore[union-attr]

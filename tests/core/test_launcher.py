@@ -47,7 +47,8 @@ async def test_crashing_node_is_restarted_and_health_shows_it():
     assert health["flaky"]["state"] == "running"
     assert "sensor exploded" in health["flaky"]["last_error"]
     assert Flaky.torn_down == 2
-    assert stops and all(t.is_zero for t in stops), "a critical crash must command a stop"
+    assert stops, "a critical crash must command a stop"
+    assert all(t.is_zero for t in stops), "a critical crash must command a stop"
     await launcher.stop()
     assert Steady.stopped
     assert all(h.state is NodeState.STOPPED for h in launcher.health.values())
@@ -77,3 +78,37 @@ async def test_health_shows_each_nodes_topic_rates():
     assert report["heartbeat"]["topics"]["/sage/heartbeat"] == 1.0
     assert report["steady"]["topics"] == {}
     await launcher.stop()
+
+
+async def test_health_goes_out_on_its_latched_topic_at_each_change():
+    from sage_robot.core import topics
+    from sage_robot.core.msgs import HealthReport
+
+    Flaky.builds = 0
+    clock = SimClock()
+    ctx = NodeContext(Bus(clock), clock, load_profile())
+    reports: list[HealthReport] = []
+    ctx.bus.subscribe(topics.HEALTH, HealthReport, reports.append, maxsize=1000)
+    launcher = Launcher(ctx, [NodeSpec("flaky", Flaky), NodeSpec("steady", Steady)])
+    await launcher.start()
+    await clock.step(0.01)
+    latest = ctx.bus.latest(topics.HEALTH)
+    assert latest is not None
+    assert {h.name: h.state for h in latest.nodes} == {"flaky": "running", "steady": "running"}
+    for _ in range(50):  # before the first diagnostics period: the crash alone publishes
+        await clock.step(0.01)
+    latest = ctx.bus.latest(topics.HEALTH)
+    assert latest is not None
+    flaky = next(h for h in latest.nodes if h.name == "flaky")
+    assert flaky.restarts >= 1
+    assert "sensor exploded" in flaky.last_error
+    for _ in range(600):
+        await clock.step(0.01)
+    latest = ctx.bus.latest(topics.HEALTH)
+    assert latest is not None
+    report = launcher.health_report()
+    assert {h.name: {**vars(h)} for h in latest.nodes} == report
+    assert all(topics.HEALTH not in h.topics for h in latest.nodes)  # the launcher's, not a node's
+    await launcher.stop()
+    assert ctx.bus.latest(topics.HEALTH).nodes[0].state == "stopped"  # type: ignore[union-attr]
+    assert len(reports) > 5

@@ -31,5 +31,6 @@ def test_log_level_is_the_terminals_and_recent_records_keep_info() -> None:
     )
     assert proc.returncode == 0, proc.stderr
     assert "loud warning" in proc.stderr
-    assert "quiet info" not in proc.stderr and "quiet warning" not in proc.stderr
+    assert "quiet info" not in proc.stderr
+    assert "quiet warning" not in proc.stderr
     assert proc.stdout.strip() == "['loud warning', 'quiet info', 'quiet warning']"

@@ -5,7 +5,9 @@ import pytest
 
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.mapio import cell_to_world, read_map, world_to_cell, write_map
-from sage_robot.core.msgs import OccupancyGrid, Pose2D
+from sage_robot.core.msgs import Pose2D
+
+from ..support.grids import blank, grid_of
 
 REAL_MAPS = [
     ("maps/willow-2010-02-18/willow-2010-02-18-0.10.yaml", (608, 566), 0.10),
@@ -22,7 +24,8 @@ def test_real_maps_load(shared_data, rel, shape, res):
     assert grid.data.shape == shape
     assert grid.resolution == pytest.approx(res)
     values = set(np.unique(grid.data).tolist())
-    assert values <= {-1, 0, 100} and {0, 100} <= values
+    assert values <= {-1, 0, 100}
+    assert {0, 100} <= values
 
 
 def test_seed_style_free_thresh_and_flip(tmp_path):
@@ -43,14 +46,15 @@ def test_seed_style_free_thresh_and_flip(tmp_path):
 def test_round_trip_is_exact(tmp_path):
     rng = np.random.default_rng(3)
     data = rng.choice(np.array([-1, 0, 100], dtype=np.int8), size=(40, 70))
-    grid = OccupancyGrid(0.0, "map", 0.05, Pose2D(1.5, -2.25, 0.0), data)
+    grid = grid_of(data, 0.05, (1.5, -2.25))
     back = read_map(write_map(grid, tmp_path / "out.yaml", free_thresh=0.1))
     assert np.array_equal(back.data, data)
-    assert back.origin == grid.origin and back.resolution == grid.resolution
+    assert back.origin == grid.origin
+    assert back.resolution == grid.resolution
 
 
 def test_transforms_with_rotated_origin():
-    grid = OccupancyGrid(0.0, "map", 0.1, Pose2D(2.0, 1.0, math.pi / 2), np.zeros((10, 20), np.int8))
+    grid = blank(10, 20, 0.1, (2.0, 1.0), theta=math.pi / 2)
     x, y = cell_to_world(grid, 3, 5)  # cell centre at grid (0.55, 0.35) → rotated 90°
     assert (float(x), float(y)) == pytest.approx((2.0 - 0.35, 1.0 + 0.55))
     r, c = world_to_cell(grid, x, y)

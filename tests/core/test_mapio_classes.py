@@ -17,8 +17,9 @@ import yaml
 from PIL import Image
 
 from sage_robot.core.mapio import DEFAULT_FREE_THRESH, read_map, write_map
-from sage_robot.core.msgs import OccupancyGrid, Pose2D
 from sage_robot.core.paths import package_data
+
+from ..support.grids import grid_of
 
 SHIPPED = package_data("maps", "campus", "map.yaml")
 
@@ -67,14 +68,15 @@ def test_grey_205_with_the_shipped_thresholds_is_unknown(tmp_path: Path) -> None
 def test_the_shipped_map_keeps_its_unknown_outside() -> None:
     grid = read_map(SHIPPED)
     pixels = np.asarray(Image.open(SHIPPED.parent / "map.pgm"))[::-1]
-    assert np.array_equal(grid.data == -1, pixels == 205) and (grid.data == -1).any()
+    assert np.array_equal(grid.data == -1, pixels == 205)
+    assert (grid.data == -1).any()
     assert np.array_equal(grid.data == 0, pixels == 254)
     assert np.array_equal(grid.data == 100, pixels == 0)
 
 
 def test_a_trinary_grid_round_trips_with_the_default_thresholds(tmp_path: Path) -> None:
     data = np.random.default_rng(5).choice(np.array([-1, 0, 100], dtype=np.int8), size=(30, 50))
-    grid = OccupancyGrid(0.0, "map", 0.05, Pose2D(0.0, 0.0, 0.0), data)
+    grid = grid_of(data, 0.05)
     path = write_map(grid, tmp_path / "rt.yaml")
     assert yaml.safe_load(path.read_text(encoding="utf-8"))["free_thresh"] == DEFAULT_FREE_THRESH
     assert np.array_equal(read_map(path).data, data)

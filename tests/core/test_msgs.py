@@ -29,6 +29,8 @@ EXAMPLES = [
     msgs.Text("hello"),
     msgs.Event(11.0, "nav", "arrived", "at the cafe", {"place": "GUELLY_DELLY"}),
     msgs.EStopState(True, "operator"),
+    msgs.NodeHealth("web", "running", 1, "", 2.5, True, {"clients": 2}, {"/sage/ui_state": 4.0}),
+    msgs.HealthReport(12.0, (msgs.NodeHealth("mcu_sim", "backoff", last_error="boom"),)),
     nav.NavigateGoal(place="the cafe"),
     nav.NavigateGoal(pose=msgs.Pose2D(1, 2, 3)),
     nav.NavigateFeedback(nav.NavState.WAITING_FOR_PEOPLE, "GUELLY_DELLY", 12.5, 30.0),

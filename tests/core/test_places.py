@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from sage_robot.core.errors import ConfigError
-from sage_robot.core.msgs import OccupancyGrid, Pose2D
 from sage_robot.core.places import load_places, parse_places, validate_places, write_places
+
+from ..support.grids import grid_of
 
 SEED_STYLE = """
 BIO_ENG_LAB:
@@ -71,7 +72,7 @@ def test_unknown_key_and_bad_pose_name_the_place():
 def test_pose_in_wall_or_outside_map_is_refused():
     data = np.zeros((20, 20), dtype=np.int8)
     data[10, :] = 100
-    grid = OccupancyGrid(0.0, "map", 0.1, Pose2D(), data)
+    grid = grid_of(data, 0.1)
     ok = parse_places({"places": [{"name": "A", "pose": [0.5, 0.5, 0]}]}, "w.yaml")
     validate_places(ok, grid)
     bad = parse_places(

@@ -142,7 +142,8 @@ def corpus_services(
     }
     for svc in services.values():
         results = svc.ensure_corpus()
-        assert results and all(r.ok for r in results), [r.message for r in results if not r.ok]
+        assert results, [r.message for r in results if not r.ok]
+        assert all(r.ok for r in results), [r.message for r in results if not r.ok]
     yield services
     for svc in services.values():
         svc.close()

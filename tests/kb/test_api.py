@@ -51,16 +51,19 @@ async def test_upload_then_search_then_delete(kb):
         r = await c.post("/api/kb/search", json={"query": "how many swimming lanes are there?", "top_k": 2})
         assert r.status_code == 200
         answer = r.json()
-        assert answer["query"] == "how many swimming lanes are there?" and len(answer["results"]) == 2
+        assert answer["query"] == "how many swimming lanes are there?"
+        assert len(answer["results"]) == 2
         best = answer["results"][0]
-        assert best["source"] == "pool.docx" and "eight lanes" in best["content"]
+        assert best["source"] == "pool.docx"
+        assert "eight lanes" in best["content"]
         docs = (await c.get("/api/kb/documents")).json()["documents"]
         assert {d["source"] for d in docs} == {"pool.docx", "greenhouse.md"}
         pool = next(d for d in docs if d["source"] == "pool.docx")
         r = await c.delete(f"/api/kb/documents/{pool['id']}", headers=BEARER)
         assert r.status_code == 204
         r = await c.delete(f"/api/kb/documents/{pool['id']}", headers=BEARER)
-        assert r.status_code == 404 and r.json() == {"detail": f"no document with id {pool['id']}"}
+        assert r.status_code == 404
+        assert r.json() == {"detail": f"no document with id {pool['id']}"}
         r = await c.post("/api/kb/search", json={"query": "swimming lanes"})
         assert all(x["source"] != "pool.docx" for x in r.json()["results"])
 
@@ -73,16 +76,19 @@ async def test_reupload_unchanged_is_a_no_op_and_a_corrupt_file_fails_alone(kb):
         assert [x["status"] for x in r.json()["results"]] == ["unchanged", "failed"]
         assert "broken.pdf" in r.json()["results"][1]["message"]
         r = await upload(c, [("broken.pdf", b"%PDF-1.4 garbage")])
-        assert r.status_code == 422 and "broken.pdf" in r.json()["detail"]
+        assert r.status_code == 422
+        assert "broken.pdf" in r.json()["detail"]
         r = await upload(c, [("photo.png", b"\x89PNG")])
-        assert r.status_code == 422 and "unsupported file type '.png'" in r.json()["detail"]
+        assert r.status_code == 422
+        assert "unsupported file type '.png'" in r.json()["detail"]
 
 
 async def test_writes_need_the_operator_login(kb):
     async with client(create_app(kb, SecretStr(PASSWORD))) as c:
         for headers in ({}, {"Authorization": "Bearer nope"}, {"Authorization": "Basic !!!"}):
             r = await upload(c, [("greenhouse.md", MARKDOWN)], headers=headers)
-            assert r.status_code == 401 and r.json() == {"detail": "operator login required"}
+            assert r.status_code == 401
+            assert r.json() == {"detail": "operator login required"}
             assert r.headers["www-authenticate"].startswith("Basic")
         assert (await c.delete("/api/kb/documents/1")).status_code == 401
         r = await c.post("/api/kb/send-emails", json={"subject": "s", "body": "b"})
@@ -90,19 +96,24 @@ async def test_writes_need_the_operator_login(kb):
         assert (await c.get("/api/kb/documents")).json() == {"documents": []}  # nothing was written
     async with client(create_app(kb, None)) as c:  # no password configured: writes disabled
         r = await upload(c, [("greenhouse.md", MARKDOWN)], headers=BASIC)
-        assert r.status_code == 403 and "SAGE_OPERATOR_PASSWORD" in r.json()["detail"]
+        assert r.status_code == 403
+        assert "SAGE_OPERATOR_PASSWORD" in r.json()["detail"]
 
 
 async def test_bad_requests_get_json_4xx(kb):
     async with client(create_app(kb, SecretStr(PASSWORD))) as c:
         r = await c.post("/api/kb/search", json={"query": "", "top_k": 5})
-        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "query"]
+        assert r.status_code == 422
+        assert r.json()["detail"][0]["loc"] == ["body", "query"]
         r = await c.post("/api/kb/search", json={"query": "x", "top_k": 500})
-        assert r.status_code == 422 and r.json()["detail"][0]["loc"] == ["body", "top_k"]
+        assert r.status_code == 422
+        assert r.json()["detail"][0]["loc"] == ["body", "top_k"]
         r = await c.post("/api/kb/search", content=b"not json", headers={"Content-Type": "application/json"})
-        assert r.status_code == 422 and "detail" in r.json()
+        assert r.status_code == 422
+        assert "detail" in r.json()
         r = await c.post("/api/kb/search", json={"query": "   "})
-        assert r.status_code == 422 and r.json() == {"detail": "the query is empty"}
+        assert r.status_code == 422
+        assert r.json() == {"detail": "the query is empty"}
         r = await c.delete("/api/kb/documents/abc", headers=BASIC)
         assert r.status_code == 422
 
@@ -115,15 +126,18 @@ async def test_send_emails_through_a_real_smtp_server(kb):
         async with client(create_app(kb, SecretStr(PASSWORD), email)) as c:
             body = {"subject": "Battery low", "body": "SAGE is at 20 %."}
             r = await c.post("/api/kb/send-emails", json=body, headers=BASIC)
-            assert r.status_code == 200 and r.json()["ok"] is True
+            assert r.status_code == 200
+            assert r.json()["ok"] is True
             r = await c.post(
                 "/api/kb/send-emails", json={**body, "recipients": ["not-an-address"]}, headers=BASIC
             )
-            assert r.status_code == 422 and "not an e-mail address" in r.json()["detail"]
+            assert r.status_code == 422
+            assert "not an e-mail address" in r.json()["detail"]
     assert [m["Subject"] for m in inbox.messages] == ["Battery low"]
     async with client(create_app(kb, SecretStr(PASSWORD), None)) as c:
         r = await c.post("/api/kb/send-emails", json={"subject": "s"}, headers=BASIC)
-        assert r.status_code == 503 and "not configured" in r.json()["detail"]
+        assert r.status_code == 503
+        assert "not configured" in r.json()["detail"]
 
 
 def test_openapi_schema_is_valid(kb):
@@ -146,9 +160,11 @@ async def test_admin_page_is_served(kb):
     async with client(create_app(kb, SecretStr(PASSWORD))) as c:
         page = await c.get("/kb/admin")
         script = await c.get("/kb/admin/admin.js")
-    assert page.status_code == 200 and "text/html" in page.headers["content-type"]
+    assert page.status_code == 200
+    assert "text/html" in page.headers["content-type"]
     assert '<script type="module" src="/kb/admin/admin.js">' in page.text
-    assert script.status_code == 200 and "javascript" in script.headers["content-type"]
+    assert script.status_code == 200
+    assert "javascript" in script.headers["content-type"]
     assert "/api/kb/documents" in script.text
 
 
@@ -180,9 +196,11 @@ async def test_upload_and_search_over_a_real_http_server(real_server):
     pdf = make_pdf(["The library lends laptops for up to three days to any student with an ID card."])
     async with httpx.AsyncClient(base_url=real_server, timeout=TIMEOUT_S) as c:
         r = await c.post("/api/kb/documents", files=[("files", ("library.pdf", pdf))], headers=BASIC)
-        assert r.status_code == 201 and r.json()["results"][0]["status"] == "added"
+        assert r.status_code == 201
+        assert r.json()["results"][0]["status"] == "added"
         r = await c.post("/api/kb/search", json={"query": "can I borrow a notebook computer", "top_k": 1})
         [hit] = r.json()["results"]
-        assert hit["source"] == "library.pdf" and hit["section"] == "page 1"
+        assert hit["source"] == "library.pdf"
+        assert hit["section"] == "page 1"
         r = await c.post("/api/kb/documents", files=[("files", ("x.md", b"# x"))])
         assert r.status_code == 401

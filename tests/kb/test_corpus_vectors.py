@@ -45,7 +45,8 @@ def test_first_run_embeds_nothing_and_other_embedders_ignore_the_table(tmp_path,
     counting = Counting(embedder)
     service = KbService(SqliteStore(tmp_path / "kb.sqlite3", embedder.dim), counting)
     results = service.ensure_corpus()
-    assert len(results) == 18 and all(r.status == "added" for r in results)
+    assert len(results) == 18
+    assert all(r.status == "added" for r in results)
     assert counting.texts == 0  # every chunk came from the table
     service.search("coffee", 1)
     assert counting.texts == 1  # questions are embedded as usual

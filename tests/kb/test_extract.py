@@ -21,7 +21,8 @@ def test_markdown_keeps_heading_paths():
 def test_plain_text_paragraphs():
     doc = extract(TEXT, "bikes.txt")
     assert doc.title == "bikes"
-    assert len(doc.blocks) == 3 and doc.blocks[1].text.startswith("A free bicycle repair stand")
+    assert len(doc.blocks) == 3
+    assert doc.blocks[1].text.startswith("A free bicycle repair stand")
 
 
 def test_pdf_pages_become_sections():
@@ -44,8 +45,10 @@ def test_html_main_text_without_boilerplate():
     doc = extract(HTML, "planetarium.html")
     assert doc.title == "Planetarium shows"
     text = " ".join(b.text for b in doc.blocks)
-    assert "Saturn's rings" in text and "Friday evening" in text
-    assert "Cookie settings" not in text and "About us" not in text
+    assert "Saturn's rings" in text
+    assert "Friday evening" in text
+    assert "Cookie settings" not in text
+    assert "About us" not in text
     assert any(b.section.endswith("Telescope nights") for b in doc.blocks)
 
 
@@ -71,7 +74,9 @@ def test_chunks_follow_sections_and_overlap():
     assert all(len(c.text) <= 400 for c in chunks)
     assert [c.ordinal for c in chunks] == list(range(len(chunks)))
     a = [c for c in chunks if c.section == "Doc > A"]
-    assert len(a) > 3 and chunks[-1].section == "Doc > B" and chunks[-1].text == "Short part."
+    assert len(a) > 3
+    assert chunks[-1].section == "Doc > B"
+    assert chunks[-1].text == "Short part."
     for prev, nxt in itertools.pairwise(a):  # each chunk starts with the tail of the one before
         head = nxt.text.split(". ")[0]
         assert head in prev.text

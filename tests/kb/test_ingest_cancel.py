@@ -67,13 +67,17 @@ def test_progress_is_reported_and_embedding_goes_in_bounded_batches(service, emb
     assert service.progress().state == "idle"
     big = PendingDocument("big.md", "big.md", data=place("Archive", paragraphs=120))
     results = service.ingest_documents([*docs("Lobby"), big])
-    assert [r.status for r in results] == ["added", "added"] and results[1].chunks > EMBED_BATCH
+    assert [r.status for r in results] == ["added", "added"]
+    assert results[1].chunks > EMBED_BATCH
     assert max(hook.batches) <= EMBED_BATCH
-    assert {p.state for p in seen} == {"running"} and {p.documents_total for p in seen} == {2}
-    assert seen[0].current == "Lobby.md" and seen[-1].current == "big.md"
+    assert {p.state for p in seen} == {"running"}
+    assert {p.documents_total for p in seen} == {2}
+    assert seen[0].current == "Lobby.md"
+    assert seen[-1].current == "big.md"
     on_big = [p for p in seen if p.current == "big.md"]
     assert [p.chunks_done for p in on_big] == list(range(0, results[1].chunks, EMBED_BATCH))
-    assert {p.chunks_total for p in on_big} == {results[1].chunks} and on_big[0].documents_done == 1
+    assert {p.chunks_total for p in on_big} == {results[1].chunks}
+    assert on_big[0].documents_done == 1
     final = service.progress()
     assert (final.state, final.documents_done, final.current, final.failed) == ("done", 2, "", 0)
     assert final.finished_at >= final.started_at > 0
@@ -99,7 +103,8 @@ def test_cancel_mid_document_stores_nothing_of_it(service, embedder, small_batch
     docs_now = {str(d["source"]): d for d in service.list_documents()}
     assert set(docs_now) == {"Atrium.md", "Lobby.md", "Gallery.md"}
     gallery = docs_now["Gallery.md"]  # still the old version, whole
-    assert gallery["id"] == first[0].document_id and gallery["chunks"] == first[0].chunks
+    assert gallery["id"] == first[0].document_id
+    assert gallery["chunks"] == first[0].chunks
     assert service.store.count_chunks() == old_chunks + results[0].chunks + results[1].chunks
     progress = service.progress()
     assert (progress.state, progress.documents_done, progress.documents_total) == ("cancelled", 2, 4)
@@ -142,21 +147,26 @@ async def test_http_progress_and_cancel(gated, small_batches):
         upload = asyncio.create_task(c.post("/api/kb/documents", files=files, headers=AUTH))
         assert await asyncio.to_thread(entered.wait, WAIT_S)
         now = (await c.get("/api/kb/ingest")).json()
-        assert now["state"] == "running" and now["current"] == "Lobby.md"
+        assert now["state"] == "running"
+        assert now["current"] == "Lobby.md"
         assert (now["documents_done"], now["documents_total"]) == (1, 3)
-        assert now["chunks_total"] > 0 and now["chunks_done"] == 0
+        assert now["chunks_total"] > 0
+        assert now["chunks_done"] == 0
         busy = await c.post("/api/kb/documents", files=files[:1], headers=AUTH)
-        assert busy.status_code == 409 and "already running (1 of 3 documents done)" in busy.json()["detail"]
+        assert busy.status_code == 409
+        assert "already running (1 of 3 documents done)" in busy.json()["detail"]
         assert (await c.post("/api/kb/ingest/cancel")).status_code == 401  # writes need the login
         r = await c.post("/api/kb/ingest/cancel", headers=AUTH)
-        assert r.status_code == 202 and r.json()["state"] == "cancelling"
+        assert r.status_code == 202
+        assert r.json()["state"] == "cancelling"
         release.set()
         answer = await asyncio.wait_for(upload, WAIT_S)
         assert answer.status_code == 201
         assert [x["status"] for x in answer.json()["results"]] == ["added", "cancelled", "cancelled"]
         assert (await c.get("/api/kb/ingest")).json()["state"] == "cancelled"
         r = await c.post("/api/kb/ingest/cancel", headers=AUTH)
-        assert r.status_code == 409 and r.json() == {"detail": "no ingest is running"}
+        assert r.status_code == 409
+        assert r.json() == {"detail": "no ingest is running"}
         listed = (await c.get("/api/kb/documents")).json()["documents"]
         assert [d["source"] for d in listed] == ["Atrium.md"]
         schema = (await c.get("/openapi.json")).json()

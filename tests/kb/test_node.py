@@ -45,19 +45,23 @@ async def test_first_run_ingests_the_corpus_and_answers(tmp_path, use_test_embed
         reply = await node.bus.call(
             topics.KB_SEARCH, SearchRequest("Where can I get a sandwich?", 3), CALL_TIMEOUT_S
         )
-        assert isinstance(reply, SearchResponse) and len(reply.passages) == 3
+        assert isinstance(reply, SearchResponse)
+        assert len(reply.passages) == 3
         assert reply.passages[0].source == "corpus/places/guelly_delly.md"
-        assert node.ingested == 18 and node.ctx.resources[KB_SERVICE] is node.service
+        assert node.ingested == 18
+        assert node.ctx.resources[KB_SERVICE] is node.service
         with pytest.raises(ServiceError, match="the query is empty"):
             await node.bus.call(topics.KB_SEARCH, SearchRequest("  "), CALL_TIMEOUT_S)
         assert node.stats() == {"searches": 1, "ingested": 18}
     finally:
         await stop(node, task)
-    assert not node.bus.has_service(topics.KB_SEARCH) and KB_SERVICE not in node.ctx.resources
+    assert not node.bus.has_service(topics.KB_SEARCH)
+    assert KB_SERVICE not in node.ctx.resources
 
     node, task = await start(tmp_path)  # second run: the store has documents, nothing is re-ingested
     try:
         reply = await node.bus.call(topics.KB_SEARCH, SearchRequest("clean room gown", 1), CALL_TIMEOUT_S)
-        assert reply.passages[0].source == "corpus/places/clean_room.md" and node.ingested == 0
+        assert reply.passages[0].source == "corpus/places/clean_room.md"
+        assert node.ingested == 0
     finally:
         await stop(node, task)

@@ -16,7 +16,8 @@ MIN_RECALL_AT_5 = 0.9  # of the whole set; the benchmark reports the exact value
 
 
 def test_question_set_is_big_enough_and_points_at_real_documents():
-    assert len(QUESTIONS) >= 60 and sum(bool(q.get("heldout")) for q in QUESTIONS) >= 15
+    assert len(QUESTIONS) >= 60
+    assert sum(bool(q.get("heldout")) for q in QUESTIONS) >= 15
     docs = {p.relative_to(CORPUS_DIR).as_posix() for p in CORPUS_DIR.rglob("*.md")}
     assert {q["doc"] for q in QUESTIONS} == docs  # every document is asked about
 
@@ -42,13 +43,17 @@ def test_paraphrased_questions_come_first(corpus_services, backend, question, do
     [best] = corpus_services[backend].search(question, 1)
     assert best.source == CORPUS_PREFIX + doc
     assert words in best.text.lower()
-    assert best.title and best.section.startswith(best.title) and best.document_id > 0
-    assert 0 < best.similarity <= 1 and best.score > 0
+    assert best.title
+    assert best.section.startswith(best.title)
+    assert best.document_id > 0
+    assert 0 < best.similarity <= 1
+    assert best.score > 0
 
 
 def test_seed_style_answer(corpus_services):
     answer = passages_as_answer("coffee", corpus_services["sqlite"].search("coffee", 2))
-    assert answer["query"] == "coffee" and len(answer["results"]) == 2
+    assert answer["query"] == "coffee"
+    assert len(answer["results"]) == 2
     assert set(answer["results"][0]) == {
         "content",
         "source",

@@ -36,7 +36,8 @@ def test_folder_ingest_every_format_and_a_corrupt_pdf_fails_alone(service, folde
         "bikes.txt",
         "corrupt.pdf",
     }
-    assert results["corrupt.pdf"].status == "failed" and "corrupt.pdf" in results["corrupt.pdf"].message
+    assert results["corrupt.pdf"].status == "failed"
+    assert "corrupt.pdf" in results["corrupt.pdf"].message
     assert all(r.status == "added" and r.chunks > 0 for n, r in results.items() if n != "corrupt.pdf")
     assert results["library.pdf"].pages == 2
     assert len(service.list_documents()) == 5
@@ -47,7 +48,8 @@ def test_folder_ingest_every_format_and_a_corrupt_pdf_fails_alone(service, folde
     assert top_source(service, "Where are orchids grown?").endswith("greenhouse.md")
     assert top_source(service, "Where can I pump up my bike tyre?").endswith("bikes.txt")
     page2 = service.search("reserve a quiet room to study", 1)[0]
-    assert page2.section == "page 2" and page2.title == "Library handbook"
+    assert page2.section == "page 2"
+    assert page2.title == "Library handbook"
 
 
 def test_unchanged_reingest_is_a_no_op(service, folder):
@@ -68,7 +70,8 @@ def test_changed_file_replaces_its_chunks(service, tmp_path):
     path.write_text("# Gym\n\nThe climbing wall is open on Sunday afternoons.\n")
     second = service.ingest_file(path)
     assert (first.status, second.status) == ("added", "replaced")
-    assert second.document_id == first.document_id and len(service.list_documents()) == 1
+    assert second.document_id == first.document_id
+    assert len(service.list_documents()) == 1
     texts = [p.text for p in service.search("gym opening time climbing wall", 5)]
     assert texts == ["The climbing wall is open on Sunday afternoons."]
 
@@ -82,7 +85,8 @@ def test_delete_by_document(service, folder):
 
 def test_missing_file_is_a_failed_result(service, tmp_path):
     [result] = service.ingest_paths([tmp_path / "nope.md"])
-    assert result.status == "failed" and "cannot read" in result.message
+    assert result.status == "failed"
+    assert "cannot read" in result.message
 
 
 @pytest.mark.parametrize(

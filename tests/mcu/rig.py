@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
-import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,7 +15,9 @@ from sage_robot.core.node import NodeContext
 from sage_robot.hardware.mcu.bridge import SerialBridgeNode
 from sage_robot.sim.mcu_pty import McuSimNode
 
-SETTLE_TIMEOUT_S = 3.0  # real seconds to let the RX thread catch up (bounded)
+from ..support.waits import describe, drain, until
+
+SETTLE_TIMEOUT_S = 10.0  # wall s bound on the bridge reading what is waiting (a few loop turns)
 REPEAT_S = 0.1  # a held command is re-published this often, as teleop and the navigator do
 
 
@@ -31,7 +31,6 @@ class Rig:
     battery: list[BatteryState] = field(default_factory=list)
     imu: list[Imu] = field(default_factory=list)
     status: list[DiagnosticStatus] = field(default_factory=list)
-    lost_odom: int = 0  # ODOM frames sent before the bridge listened (flushed on open)
     held: Twist | None = None  # the command the rig keeps publishing (None: silent)
     held_t: float = 0.0
 
@@ -48,7 +47,7 @@ class Rig:
         """The publisher stops publishing (crashed, frozen): the last command stands on the bus."""
         self.held = None
 
-    async def run(self, seconds: float, real_sleep_s: float = 0.0) -> None:
+    async def run(self, seconds: float) -> None:
         """Step the simulation ``seconds`` (physics hooks, then the clock)."""
         for _ in range(round(seconds / SIM_STEP_S)):
             if self.held is not None and self.clock.now() - self.held_t >= REPEAT_S - 1e-9:
@@ -57,26 +56,24 @@ class Rig:
             for hook in list(self.ctx.resources[SIM_STEP_HOOKS]):
                 hook(SIM_STEP_S)
             await self.clock.step(SIM_STEP_S)
-            if real_sleep_s:
-                await asyncio.sleep(real_sleep_s)
+
+    def _port_read(self) -> bool:
+        port = self.bridge._port  # read on simulated-clock timers: nothing left after a step
+        return port is None or port.in_waiting == 0
 
     async def settle(self) -> None:
-        """Wait (real time, bounded) until the bridge decoded every ODOM frame sent."""
-        deadline = time.monotonic() + SETTLE_TIMEOUT_S
-        while time.monotonic() < deadline:
-            got = self.bridge.decoder.stats.frames["ODOM"]
-            if got >= self.firmware.frames_sent["ODOM"] - self.lost_odom:
-                break
-            await asyncio.sleep(0.002)
-        for _ in range(5):  # let call_soon_threadsafe deliveries and callbacks run
-            await asyncio.sleep(0.002)
+        """Wait (wall clock, bounded) until the bridge has read every byte waiting on its port,
+        then let the bus deliver what it published."""
+        await until(self._port_read, "the bridge to read what waits on its port", SETTLE_TIMEOUT_S)
+        await drain(20)
 
-    async def until(self, predicate: Any, max_seconds: float, real_sleep_s: float = 0.002) -> float:
+    async def until(self, predicate: Any, max_seconds: float) -> float:
         """Step until ``predicate()``; return the simulated time it took (fails if never)."""
         t0 = self.clock.now()
         while not predicate():
-            assert self.clock.now() - t0 < max_seconds, f"not reached within {max_seconds} s"
-            await self.run(SIM_STEP_S, real_sleep_s)
+            assert self.clock.now() - t0 < max_seconds, (
+                f"not reached within {max_seconds} simulated s: {describe(predicate)}")
+            await self.run(SIM_STEP_S)
         return self.clock.now() - t0
 
 
@@ -94,8 +91,6 @@ async def make_rig(overrides: dict[str, Any] | None = None) -> Rig:
     ctx.bus.subscribe(topics.MCU_STATUS, DiagnosticStatus, rig.status.append, maxsize=1000)
     await bridge.setup()
     await rig.until(lambda: bridge.connected, 2.0)
-    await asyncio.sleep(0.05)
-    rig.lost_odom = rig.firmware.frames_sent["ODOM"] - bridge.decoder.stats.frames["ODOM"]
     return rig
 
 

@@ -17,6 +17,7 @@ from sage_robot.core import topics
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs import Event, Level
 from sage_robot.hardware.mcu import protocol as proto
+from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
 from sage_robot.sim.firmware import EncoderFaults
 
 from .rig import Rig, close_rig, make_rig
@@ -31,12 +32,15 @@ async def test_half_a_metre_per_second_for_two_seconds_is_about_a_metre(rig: Rig
     last = rig.odom[-1]
     assert last.pose.x == pytest.approx(1.0, abs=0.1)
     assert last.pose.x == pytest.approx(rig.sim.floor.pose[0], abs=0.01)
-    assert abs(last.pose.y) < 1e-3 and -math.pi <= last.pose.theta < math.pi
+    assert abs(last.pose.y) < 1e-3
+    assert -math.pi <= last.pose.theta < math.pi
     assert (last.frame_id, last.child_frame_id) == ("odom", "base_link")
-    assert last.pose_covariance[0] > 0 and last.twist_covariance[8] > 0
+    assert last.pose_covariance[0] > 0
+    assert last.twist_covariance[8] > 0
     assert max(o.twist.linear_x for o in rig.odom) == pytest.approx(0.5, abs=0.05)
     stats = rig.bridge.stats()
-    assert stats["frames"]["ODOM"] == len(rig.odom) and not stats["errors"]
+    assert stats["frames"]["ODOM"] == len(rig.odom)
+    assert not stats["errors"]
 
 
 async def test_stop_brings_the_motors_to_zero_within_the_watchdog_plus_ramp(rig: Rig):
@@ -63,7 +67,8 @@ async def test_a_dead_jetson_trips_the_watchdog(rig: Rig):
     last = rig.firmware.last_command_t
     p = rig.firmware.params
     await rig.run(p.watchdog_s - 0.05)
-    assert not rig.firmware.watchdog_tripped and rig.firmware.wheel_speeds[0] > 0.4
+    assert not rig.firmware.watchdog_tripped
+    assert rig.firmware.wheel_speeds[0] > 0.4
     took = await rig.until(lambda: rig.firmware.stopped, 0.5 / p.watchdog_ramp_mps2 + 0.6)
     assert rig.firmware.watchdog_tripped
     assert rig.clock.now() - last <= p.watchdog_s + 0.5 / p.watchdog_ramp_mps2 + 0.5
@@ -79,7 +84,8 @@ async def test_reverse_commands_never_drive_backwards(rig: Rig):
     rig.command(-0.4, 0.5)  # a turn in place is still allowed
     await rig.run(1.0)
     await rig.settle()
-    assert rig.firmware.last_command[0] == 0.0 and rig.firmware.last_command[1] > 0
+    assert rig.firmware.last_command[0] == 0.0
+    assert rig.firmware.last_command[1] > 0
     assert rig.odom[-1].pose.theta > 0.2
     assert math.hypot(*rig.sim.floor.pose[:2]) < 0.01
     assert rig.bridge.stats()["cmd_clamped"] >= 2  # both commands (each repeat counts too)
@@ -113,7 +119,8 @@ async def test_command_timeout_stops_a_stale_command():
         took = await rig.until(lambda: rig.firmware.last_command == (0.0, 0.0), 1.0)
         silent = rig.clock.now() - last_publish
         assert 0.5 <= silent <= 0.5 + 0.05, f"zero on the wire {silent:.3f} s after the last command"
-        assert took > 0 and rig.bridge.stats()["cmd_timeouts"] == 1
+        assert took > 0
+        assert rig.bridge.stats()["cmd_timeouts"] == 1
     finally:
         await close_rig(rig)
 
@@ -154,11 +161,12 @@ async def test_battery_state_carries_voltage_and_percentage(rig: Rig):
     assert last.percentage == pytest.approx(float(np.interp(last.voltage, volts, charge)))
     assert 0.0 < last.percentage < 1.0
     assert rig.bridge.stats()["frames_per_s"] == {}  # no status period elapsed yet
-    await rig.run(1.0, real_sleep_s=0.002)  # let the RX thread keep pace with the clock
+    await rig.run(1.0)
     await rig.settle()
     rates = rig.bridge.stats()["frames_per_s"]
-    # Simulated time runs faster than the RX thread's real time: the window's edges blur.
-    assert rates["ODOM"] == pytest.approx(50, abs=15) and rates["IMU"] == pytest.approx(100, abs=30)
+    # On the SimClock the bridge reads at fixed simulated times: exact but for the window's edges.
+    assert rates["ODOM"] == pytest.approx(50, abs=1)
+    assert rates["IMU"] == pytest.approx(100, abs=2)
 
 
 async def test_bad_frames_on_the_wire_are_counted_and_dropped(rig: Rig):
@@ -198,24 +206,28 @@ async def test_unplug_and_replug_are_survived(rig: Rig, caplog: pytest.LogCaptur
     await rig.run(0.5)
     rig.sim.pty.unplug()
     await rig.until(lambda: not rig.bridge.connected, 3.0)
-    await rig.run(2.0, real_sleep_s=0.0005)  # several reopen attempts, all failing
+    await rig.run(2.0)  # several reopen attempts, all failing
     lost = [r for r in caplog.records if "link lost" in r.getMessage()]
-    assert len(lost) == 1 and lost[0].levelno == logging.WARNING  # one clear line
+    assert len(lost) == 1
+    assert lost[0].levelno == logging.WARNING  # one clear line
     assert [r for r in caplog.records if r.levelno >= logging.ERROR] == []
     down = [s for s in rig.status if s.level is Level.ERROR]
-    assert down and "disconnected" in down[-1].message
+    assert down
+    assert "disconnected" in down[-1].message
     assert len(down) >= 2  # published while disconnected, not once
     assert rig.firmware.stopped  # no commands arrive: the MCU's watchdog stopped it
     n_odom = len(rig.odom)
     rig.sim.pty.replug()
     await rig.until(lambda: rig.bridge.connected, 2 * rig.ctx.settings.mcu.reconnect_s)
     rig.command(0.3)
-    await rig.run(1.0, real_sleep_s=0.0005)
+    await rig.run(1.0)
     await rig.settle()
     assert len(rig.odom) > n_odom
     assert rig.firmware.wheel_speeds[0] == pytest.approx(0.3, abs=0.03)
     stats = rig.bridge.stats()
-    assert stats["connected"] and stats["reconnects"] == 1 and stats["disconnects"] == 1
+    assert stats["connected"]
+    assert stats["reconnects"] == 1
+    assert stats["disconnects"] == 1
     assert rig.status[-1].level is Level.OK
     assert [e.kind for e in events] == ["mcu_disconnected", "mcu_reconnected"]
 
@@ -231,7 +243,8 @@ async def test_tilted_dead_wheel_shows_the_documented_drift(rig: Rig):
     true_rate = (rig.sim.floor.pose[2] - th0) / 4.0
     assert true_rate == pytest.approx(-0.5 * math.tan(tilt) / 0.400, rel=0.1)
     assert abs(rig.odom[-1].pose.theta) < 0.03  # /odom believes it drives straight
-    assert abs(rig.sim.floor.pose[1]) > 0.15 and abs(rig.odom[-1].pose.y) < 0.1
+    assert abs(rig.sim.floor.pose[1]) > 0.15
+    assert abs(rig.odom[-1].pose.y) < 0.1
 
 
 async def test_imu_calibration_waits_for_stillness_and_removes_the_bias(
@@ -246,13 +259,16 @@ async def test_imu_calibration_waits_for_stillness_and_removes_the_bias(
         rig.command(0.0)
         await rig.run(1.0)
         await rig.settle()
-        assert not rig.imu and not rig.bridge.stats()["imu_calibrated"]
+        assert not rig.imu
+        assert not rig.bridge.stats()["imu_calibrated"]
         assert any("moved during IMU calibration" in r.getMessage() for r in caplog.records)
         await rig.run(2.5)
         await rig.settle()
-        assert rig.bridge.stats()["imu_calibrated"] and rig.imu
+        assert rig.bridge.stats()["imu_calibrated"]
+        assert rig.imu
         bias = rig.firmware.imu.gyro_bias
-        assert rig.bridge.calibrator is not None and rig.bridge.calibrator.bias is not None
+        assert rig.bridge.calibrator is not None
+        assert rig.bridge.calibrator.bias is not None
         assert rig.bridge.calibrator.bias == pytest.approx(tuple(bias), abs=0.002)
         gz = [m.angular_velocity[2] for m in rig.imu]
         assert abs(sum(gz) / len(gz)) < 0.002  # bias removed
@@ -274,10 +290,11 @@ async def test_sim_profile_wires_mcu_sim_and_serial_bridge():
     specs = [NodeSpec(n, node_class(n), True) for n in ("mcu_sim", "serial_bridge")]
     launcher = await asyncio.wait_for(run_launcher(ctx, specs, until=2.0), 60)
     report = launcher.health_report()
-    assert report["mcu_sim"]["restarts"] == 0 and report["serial_bridge"]["restarts"] == 0
+    assert report["mcu_sim"]["restarts"] == 0
+    assert report["serial_bridge"]["restarts"] == 0
     assert report["serial_bridge"]["stats"]["frames"].get("ODOM", 0) > 0
     assert proto.ODOM.name in report["mcu_sim"]["stats"]["frames_sent"]
-    assert "mcu_port" not in ctx.resources  # the simulated MCU cleaned up after itself
+    assert PORT_RESOURCE not in ctx.resources  # the simulated MCU cleaned up after itself
 
 
 async def test_battery_percentage_does_not_swing_with_the_motor_load(rig: Rig):

@@ -14,20 +14,21 @@ from sage_robot.hardware.mcu.port import find_port, open_port
 from sage_robot.sim.firmware import FirmwareModel
 from sage_robot.sim.mcu_pty import PtyMcu, RealTimeMcu
 
+from ..support.waits import wait_until
+
 
 def test_drive_sends_a_bounded_clamped_command_then_stops(capsys: pytest.CaptureFixture[str]):
     with RealTimeMcu() as mcu:
         rc = main(["mcu", "drive", "--port", mcu.port_name, "--v", "0.3", "--seconds", "0.6"])
         fw = mcu.firmware
         assert rc == 0
-        deadline = time.monotonic() + 2.0  # the model's thread reads the pty every 10 ms
-        while fw.last_command != (0.0, 0.0) and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert fw.last_command == (0.0, 0.0)  # stopped at the end
+        # stopped at the end (the model's thread reads the pty every 10 ms)
+        wait_until(lambda: fw.last_command == (0.0, 0.0), "the stop at the end of the drive")
         assert fw.rx.frames >= 0.6 * 10  # re-sent at >= 10 Hz
         assert mcu.floor.pose[0] > 0.05
     out = capsys.readouterr().out
-    assert "driving v=0.3 m/s" in out and "stopped; last odometry x=+0." in out
+    assert "driving v=0.3 m/s" in out
+    assert "stopped; last odometry x=+0." in out
 
 
 def test_drive_never_reverses_and_refuses_long_drives(capsys: pytest.CaptureFixture[str]):
@@ -42,14 +43,19 @@ def test_drive_never_reverses_and_refuses_long_drives(capsys: pytest.CaptureFixt
 def test_monitor_prints_rates_values_and_errors(capsys: pytest.CaptureFixture[str]):
     assert main(["mcu", "monitor", "--sim", "--seconds", "1.3"]) == 0
     out = capsys.readouterr().out
-    assert "ODOM" in out and "BATTERY" in out and "IMU" in out and "%)" in out
-    assert "errors none" in out and "total: frames" in out
+    assert "ODOM" in out
+    assert "BATTERY" in out
+    assert "IMU" in out
+    assert "%)" in out
+    assert "errors none" in out
+    assert "total: frames" in out
 
 
 def test_monitor_every_frame(capsys: pytest.CaptureFixture[str]):
     assert main(["mcu", "monitor", "--sim", "--seconds", "0.3", "--frames"]) == 0
     out = capsys.readouterr().out
-    assert "ODOM     x=" in out and "IMU      gx=" in out
+    assert "ODOM     x=" in out
+    assert "IMU      gx=" in out
 
 
 def test_monitor_on_a_silent_port_says_so(capsys: pytest.CaptureFixture[str]):
@@ -64,7 +70,8 @@ def test_monitor_on_a_silent_port_says_so(capsys: pytest.CaptureFixture[str]):
 def test_missing_port_is_one_clear_line(capsys: pytest.CaptureFixture[str]):
     assert main(["mcu", "monitor", "--port", "/nonexistent/ttyACM9"]) == 2
     err = capsys.readouterr().err
-    assert "cannot open MCU port /nonexistent/ttyACM9" in err and "Traceback" not in err
+    assert "cannot open MCU port /nonexistent/ttyACM9" in err
+    assert "Traceback" not in err
 
 
 def test_auto_detect_takes_the_first_ttyacm(tmp_path):
@@ -85,10 +92,12 @@ def test_pty_unplug_removes_the_link_and_replug_restores_it():
         first = pty.slave_name
         assert os.path.realpath(pty.port_name) == first
         pty.unplug()
-        assert not os.path.exists(pty.port_name) and not pty.plugged
+        assert not os.path.exists(pty.port_name)
+        assert not pty.plugged
         pty.pump(0.1)  # harmless while unplugged
         pty.replug()
-        assert os.path.exists(pty.port_name) and pty.plugged
+        assert os.path.exists(pty.port_name)
+        assert pty.plugged
         assert os.path.realpath(pty.port_name) == pty.slave_name
     finally:
         pty.close()

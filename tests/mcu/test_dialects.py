@@ -31,7 +31,9 @@ def firmware_blocks(stream: bytes, offset: int) -> list[tuple[float, float]]:
 @given(v=speeds, w=speeds)
 def test_a_seed_2025_payload_never_holds_the_header_byte(v: float, w: float) -> None:
     data = SEED_2025.command(v, w)
-    assert len(data) == 9 and data[0] == 0x78 and 0x78 not in data[1:]
+    assert len(data) == 9
+    assert data[0] == 0x78
+    assert 0x78 not in data[1:]
     got_v, got_w = SEED_2025.command_values(data)
     for sent, got in ((v, got_v), (w, got_w)):
         assert abs(got) <= abs(struct.unpack("<f", struct.pack("<f", sent))[0])  # toward zero, never faster
@@ -45,7 +47,8 @@ def test_a_float_with_the_header_byte_moves_to_the_nearest_one_without_it() -> N
     assert data[1:5] == bytes((0x77, 0x56, 0x34, 0x3E))  # one last-bit step toward zero
     high = struct.unpack("<f", bytes((0x12, 0x34, 0x78, 0xBF)))[0]  # 0x78 in the mantissa's top byte
     got = SEED_2025.command_values(SEED_2025.command(high, 0.0))[0]
-    assert struct.pack("<f", got) == bytes((0xFF, 0xFF, 0x77, 0xBF)) and -0.97 < high < got < 0
+    assert struct.pack("<f", got) == bytes((0xFF, 0xFF, 0x77, 0xBF))
+    assert -0.97 < high < got < 0
 
 
 @given(v=speeds, w=speeds, offset=st.integers(0, 8), extra=st.integers(0, 8))
@@ -82,7 +85,8 @@ def test_one_filler_byte_shifts_the_alignment_by_one() -> None:
 
 def test_the_documented_dialect_writes_framed_commands() -> None:
     assert DOCUMENTED.command(0.2, -0.1) == proto.encode(proto.CMD, (0.2, -0.1))
-    assert DOCUMENTED.stop() == proto.encode(proto.CMD, (0.0, 0.0)) and DOCUMENTED.realign_step() == b""
+    assert DOCUMENTED.stop() == proto.encode(proto.CMD, (0.0, 0.0))
+    assert DOCUMENTED.realign_step() == b""
     frames = proto.Decoder().feed(DOCUMENTED.command(0.2, -0.1))
     assert frames[0].values == pytest.approx((0.2, -0.1))
 
@@ -108,7 +112,9 @@ def test_the_banner_is_found_in_any_chunking(cut: int) -> None:
     stream = b"\x7e\x02garbage" + b"WHO_AM_I=0x71\r\n" + proto.encode(proto.ODOM, (0, 0, 0, 0, 0))
     watch = BannerWatch()
     hits = [watch.feed(stream[i:i + cut]) for i in range(0, len(stream), cut)]
-    assert sum(hits) == 1 and watch.last == "WHO_AM_I=0x71" and watch.banners == 1
+    assert sum(hits) == 1
+    assert watch.last == "WHO_AM_I=0x71"
+    assert watch.banners == 1
 
 
 def test_the_dialect_is_guessed_from_what_the_mcu_sends() -> None:

@@ -51,7 +51,8 @@ def test_dead_wheel_geometry_is_the_seeds():
     wheels = DeadWheels(p, EncoderFaults(), np.random.default_rng(0))
     # Straight 1 m: the straight wheel turns 1 / (pi d) revolutions; the horizontal stays.
     ds, dh = wheels.roll(1.0, 1.0, 0.0)
-    assert ds == math.floor(1.0 / M_PER_COUNT) == 4692 and dh == 0
+    assert ds == math.floor(1.0 / M_PER_COUNT) == 4692
+    assert dh == 0
     # Spin in place at 1 rad/s for 1 s: the horizontal wheel rolls w * 0.400 m; the
     # straight wheel rolls -w * 0.1016 m (it sits left of the centre).
     wheels = DeadWheels(p, EncoderFaults(), np.random.default_rng(0))
@@ -90,7 +91,8 @@ def test_straight_run_reaches_the_commanded_speed_and_odometry_matches_truth():
     assert s.fw.odom_pose[0] == pytest.approx(s.floor.pose[0], abs=0.002)
     assert s.fw.wheel_speeds == pytest.approx((0.5, 0.5), abs=0.02)
     left, right = s.fw.pwm_us
-    assert 1500 < left <= 1700 and 1500 < right <= 1700
+    assert 1500 < left <= 1700
+    assert 1500 < right <= 1700
 
 
 def test_pwm_stays_in_the_esc_range_and_stop_is_1500():
@@ -114,7 +116,8 @@ def test_watchdog_ramps_to_zero_after_550_ms_without_commands():
     assert last is not None
     s.cmd = None  # the Jetson goes silent
     s.run(last + WATCHDOG_S - s.t - 0.02)
-    assert not s.fw.watchdog_tripped and s.fw.pwm_us[0] > 1500
+    assert not s.fw.watchdog_tripped
+    assert s.fw.pwm_us[0] > 1500
     ramp_s = 0.5 / s.fw.params.watchdog_ramp_mps2
     s.run(0.05)
     assert s.fw.watchdog_tripped
@@ -126,7 +129,8 @@ def test_watchdog_ramps_to_zero_after_550_ms_without_commands():
     assert s.fw.watchdog_trips == 1
     s.cmd = (0.2, 0.0)  # a new command clears the trip
     s.run(0.1)
-    assert not s.fw.watchdog_tripped and s.fw.pwm_us[0] > 1500
+    assert not s.fw.watchdog_tripped
+    assert s.fw.pwm_us[0] > 1500
 
 
 def test_rx_state_machine_hunts_for_sof_and_checks_type_length_and_time():
@@ -134,14 +138,16 @@ def test_rx_state_machine_hunts_for_sof_and_checks_type_length_and_time():
     good = proto.encode(proto.CMD, (0.3, -0.1))
     v32, w32 = np.float32(0.3), np.float32(-0.1)
     assert rx.feed(b"\x00\x11" + good, 0.0) == [(v32, w32)]
-    assert rx.feed(good[:5], 0.0) == [] and rx.feed(good[5:], 0.1) == [(v32, w32)]
+    assert rx.feed(good[:5], 0.0) == []
+    assert rx.feed(good[5:], 0.1) == [(v32, w32)]
     assert rx.feed(b"\x78" + good[1:], 0.2) == []  # 0x78 (the seed text's byte) is no SOF
     assert rx.feed(proto.encode(proto.BATTERY, (12.0,)), 0.3) == []  # not a command
     assert rx.errors["bad_type"] == 1
     assert rx.feed(bytes((0x7E, 0x01, 0x04)) + bytes(8), 0.4) == []
     assert rx.errors["bad_length"] == 1
     nan = bytes((0x7E, 0x01, 0x08)) + b"\x00\x00\xc0\x7f" + bytes(4)
-    assert rx.feed(nan, 0.5) == [] and rx.errors["non_finite"] == 1
+    assert rx.feed(nan, 0.5) == []
+    assert rx.errors["non_finite"] == 1
     rx.feed(good[:6], 1.0)  # half a frame, then 300 ms of silence: over the 200 ms timeout
     assert rx.feed(good[6:] + good, 1.3) == [(v32, w32)]
     assert rx.errors["timeout"] == 1
@@ -177,7 +183,8 @@ def test_battery_sags_under_motor_effort_and_discharges_faster():
     assert busy.fw.battery_voltage < idle.fw.battery_voltage - 0.2
     assert busy.fw.battery.charge < idle.fw.battery.charge
     volts = [f.values[0] for f in busy.frames if f.kind is proto.BATTERY]
-    assert min(volts) > 12.0 and max(volts) < 16.8
+    assert min(volts) > 12.0
+    assert max(volts) < 16.8
 
 
 def test_imu_has_a_constant_gyro_bias_and_noise():
@@ -221,7 +228,8 @@ def test_tilted_horizontal_wheel_steers_the_robot_while_odometry_says_straight()
     assert true_rate == pytest.approx(-V * math.tan(b) / 0.400, rel=0.1)
     odom_theta = math.remainder(s.fw.odom_pose[2], 2 * math.pi)
     assert abs(odom_theta) < 0.03  # the firmware believes it drives straight
-    assert abs(s.floor.pose[1]) > 0.15 and abs(s.fw.odom_pose[1]) < 0.1  # "steers toward walls"
+    assert abs(s.floor.pose[1]) > 0.15
+    assert abs(s.fw.odom_pose[1]) < 0.1  # "steers toward walls"
 
 
 def test_tilted_straight_wheel_under_reads_distance_by_cos():

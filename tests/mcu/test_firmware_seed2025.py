@@ -84,13 +84,15 @@ def odom(items: list[tuple[str, tuple[float, ...]]]) -> list[tuple[float, ...]]:
 # ------------------------------------------------------------------ pure parts
 def test_encoder_geometry_and_differential_drive_odometry():
     p = Seed2025Params()
-    assert p.counts_per_wheel_rev == 250 and p.metres_per_count == pytest.approx(M_PER_COUNT)
+    assert p.counts_per_wheel_rev == 250
+    assert p.metres_per_count == pytest.approx(M_PER_COUNT)
     enc = MotorEncoders(p.metres_per_count)
     enc.roll(1.0, 1.0, 1.0)
     assert enc.counts == (math.floor(1.0 / M_PER_COUNT),) * 2 == (787, 787)
     odo = EncoderOdometry(p)
     odo.update(enc.counts, 1.0)
-    assert odo.x == pytest.approx(787 * M_PER_COUNT, rel=1e-6) and odo.y == 0.0
+    assert odo.x == pytest.approx(787 * M_PER_COUNT, rel=1e-6)
+    assert odo.y == 0.0
     # Spin clockwise in place: the left wheel forward, the right backward.
     enc2, odo2 = MotorEncoders(p.metres_per_count), EncoderOdometry(p)
     for _ in range(100):
@@ -117,10 +119,15 @@ def test_theta_is_fmodf_and_stays_strictly_inside_two_pi(steps: list[int]):
 
 
 def test_esc_mapping_has_only_the_linear_band_and_the_two_steps():
-    assert esc_pulse(0.0) == 1500.0 and esc_pulse(1.0) == 1570.0 and esc_pulse(-1.0) == 1430.0
-    assert esc_pulse(100 / 70) == 1600.0 and esc_pulse(-100 / 70) == 1400.0
-    assert esc_pulse(1.44) == 1750.0 and esc_pulse(-1.44) == 1250.0
-    assert esc_pulse(math.inf) == 1750.0 and esc_pulse(-math.inf) == 1250.0
+    assert esc_pulse(0.0) == 1500.0
+    assert esc_pulse(1.0) == 1570.0
+    assert esc_pulse(-1.0) == 1430.0
+    assert esc_pulse(100 / 70) == 1600.0
+    assert esc_pulse(-100 / 70) == 1400.0
+    assert esc_pulse(1.44) == 1750.0
+    assert esc_pulse(-1.44) == 1250.0
+    assert esc_pulse(math.inf) == 1750.0
+    assert esc_pulse(-math.inf) == 1250.0
     assert esc_pulse(math.nan) == 0.0  # NaN reaches the timer as 0: no pulse
 
 
@@ -131,7 +138,8 @@ def test_pulses_in_a_drive_are_the_band_or_the_steps_and_follow_the_pi():
         s.run(2.0)
     pulses = {x for pair in s.pwm for x in pair}
     assert pulses <= {float(p) for p in range(1400, 1601)} | {1250.0, 1750.0}
-    assert {1250.0, 1750.0} <= pulses and len(pulses) > 50
+    assert {1250.0, 1750.0} <= pulses
+    assert len(pulses) > 50
     for pair, u in zip(s.pwm, s.u, strict=True):
         assert pair == (esc_pulse(u[0]), esc_pulse(u[1]))
 
@@ -157,7 +165,9 @@ def test_no_watchdog_the_last_command_runs_on():
     s.run(1.0)
     t_cmd = s.fw.last_command_t
     s.run(20.0)  # not a byte from the Jetson for 20 s
-    assert s.fw.last_command_t == t_cmd and not s.fw.watchdog_tripped and s.fw.watchdog_trips == 0
+    assert s.fw.last_command_t == t_cmd
+    assert not s.fw.watchdog_tripped
+    assert s.fw.watchdog_trips == 0
     assert s.fw.wheel_speeds == pytest.approx((0.3, 0.3), abs=0.03)
     assert s.floor.pose[0] > 0.3 * 19
 
@@ -165,12 +175,17 @@ def test_no_watchdog_the_last_command_runs_on():
 def test_a_block_not_starting_with_0x78_is_dropped_whole():
     rx = BlockReceiver()
     good = encode_seed_command(0.25, -0.5)
-    assert rx.feed(b"\x7e" + good[1:]) == [] and rx.errors[DROPPED_BLOCK] == 1 and rx.pending == 0
-    assert rx.feed(good) == [(0.25, -0.5)] and rx.frames == 1
+    assert rx.feed(b"\x7e" + good[1:]) == []
+    assert rx.errors[DROPPED_BLOCK] == 1
+    assert rx.pending == 0
+    assert rx.feed(good) == [(0.25, -0.5)]
+    assert rx.frames == 1
     # A documented-dialect CMD (11 bytes, 0x7E) is one dropped block and leaves 2 bytes
     # pending: the next seed command is misaligned and dropped too.
-    assert rx.feed(proto.encode(proto.CMD, (0.25, -0.5))) == [] and rx.pending == 2
-    assert rx.feed(good) == [] and rx.errors[DROPPED_BLOCK] == 3
+    assert rx.feed(proto.encode(proto.CMD, (0.25, -0.5))) == []
+    assert rx.pending == 2
+    assert rx.feed(good) == []
+    assert rx.errors[DROPPED_BLOCK] == 3
     # Raw: no range check (the real firmware has none).
     assert rx.feed(good[2:] + encode_seed_command(40.0, -90.0)) == [(40.0, -90.0)]
 
@@ -207,7 +222,8 @@ def test_misaligned_by_k_bytes_nothing_applies_until_the_stream_realigns(
     for a, b in zip([0, *cuts], [*cuts, len(stream)], strict=True):
         got += rx.feed(stream[a:b])
     expected = [struct.unpack("<ff", struct.pack("<ff", v, w)) for v, w in after]
-    assert got == expected and rx.pending == 0
+    assert got == expected
+    assert rx.pending == 0
 
 
 def test_non_finite_commands_are_applied_raw_and_a_nan_stops_until_reboot():
@@ -216,7 +232,8 @@ def test_non_finite_commands_are_applied_raw_and_a_nan_stops_until_reboot():
     s.run(3.0)
     s.fw.receive(encode_seed_command(math.nan, 0.0))
     s.run(0.05)
-    assert math.isnan(s.fw.last_command[0]) and s.fw.non_finite_commands == 1
+    assert math.isnan(s.fw.last_command[0])
+    assert s.fw.non_finite_commands == 1
     assert s.fw.pwm_us == (0.0, 0.0)  # no pulse: the ESC's failsafe, the wheels coast
     s.run(3.0)
     assert s.fw.stopped
@@ -309,11 +326,15 @@ async def test_over_the_pty_a_block_drives_and_odom_reports_it_with_no_battery(j
     items = jetson.items()
     assert items[0] == ("BANNER", ())  # before the first frame
     names = [name for name, _ in items]
-    assert names.count("BANNER") == 1 and "BATTERY" not in names
-    assert names.count("ODOM") in (299, 300) and names.count("IMU") in (599, 600)  # 50 / 100 Hz
-    assert jetson.fw.frames_sent["BATTERY"] == 0 and jetson.fw.rx.frames == 1
+    assert names.count("BANNER") == 1
+    assert "BATTERY" not in names
+    assert names.count("ODOM") in (299, 300)
+    assert names.count("IMU") in (599, 600)  # 50 / 100 Hz
+    assert jetson.fw.frames_sent["BATTERY"] == 0
+    assert jetson.fw.rx.frames == 1
     late = np.array(odom(items)[-50:])
-    assert late[:, 3].mean() == pytest.approx(0.3, abs=0.02) and abs(late[:, 4].mean()) < 0.02
+    assert late[:, 3].mean() == pytest.approx(0.3, abs=0.02)
+    assert abs(late[:, 4].mean()) < 0.02
     assert late[-1][0] == pytest.approx(jetson.sim.floor.pose[0], abs=0.02)
 
 
@@ -322,7 +343,8 @@ async def test_over_the_pty_theta_goes_negative_after_a_clockwise_turn(jetson: J
     await jetson.run(6.0)  # about -8.5 rad: past one full clockwise turn
     thetas = [values[2] for values in odom(jetson.items())]
     assert all(-2 * math.pi < t <= 0.0 for t in thetas)
-    assert min(thetas) < -5.5 and thetas[-1] > -4.0  # wrapped by fmodf toward zero
+    assert min(thetas) < -5.5
+    assert thetas[-1] > -4.0  # wrapped by fmodf toward zero
 
 
 async def test_reboot_sends_the_banner_again_zeroes_odometry_and_stops(jetson: Jetson):
@@ -332,12 +354,15 @@ async def test_reboot_sends_the_banner_again_zeroes_odometry_and_stops(jetson: J
     await jetson.run(3.0)
     items = jetson.items()
     banners = [i for i, (name, _) in enumerate(items) if name == "BANNER"]
-    assert len(banners) == 2 and banners[0] == 0
+    assert len(banners) == 2
+    assert banners[0] == 0
     second = banners[1]
     after = [values for name, values in items[second:] if name == "ODOM"]
     assert abs(after[0][0]) < 0.01  # odometry restarted at zero
-    assert jetson.fw.last_command == (0.0, 0.0) and jetson.fw.last_command_t is None
-    assert jetson.fw.stopped and after[-1][3] == 0.0
+    assert jetson.fw.last_command == (0.0, 0.0)
+    assert jetson.fw.last_command_t is None
+    assert jetson.fw.stopped
+    assert after[-1][3] == 0.0
 
 
 async def test_reboot_with_a_partial_block_pending_misaligns_the_stream(jetson: Jetson):
@@ -349,8 +374,10 @@ async def test_reboot_with_a_partial_block_pending_misaligns_the_stream(jetson: 
     jetson.fw.reboot()
     jetson.send(cmds[0][4:] + cmds[1] + cmds[2] + cmds[3])  # the rest, then three whole ones
     await jetson.run(0.5)
-    assert jetson.fw.rx.frames == 0 and jetson.fw.rx.errors[DROPPED_BLOCK] == 3
-    assert jetson.fw.last_command == (0.0, 0.0) and jetson.fw.rx.pending == 5
+    assert jetson.fw.rx.frames == 0
+    assert jetson.fw.rx.errors[DROPPED_BLOCK] == 3
+    assert jetson.fw.last_command == (0.0, 0.0)
+    assert jetson.fw.rx.pending == 5
     jetson.send(bytes(4) + cmds[4])  # 4 filler bytes complete the stray block: aligned
     await jetson.run(0.05)
     assert jetson.fw.rx.frames == 1

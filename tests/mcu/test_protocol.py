@@ -66,7 +66,8 @@ def test_encode_refuses_bad_values_with_a_clear_message():
         encode(proto.CMD, (0.0, math.nan))
     with pytest.raises(ValueError, match="unknown MCU frame type 'FOO'"):
         encode("FOO", ())
-    assert proto.frame_type(0x02) is proto.ODOM and proto.frame_type("imu") is proto.IMU
+    assert proto.frame_type(0x02) is proto.ODOM
+    assert proto.frame_type("imu") is proto.IMU
 
 
 def test_byte_by_byte_feeding_gives_the_same_frames():
@@ -74,15 +75,19 @@ def test_byte_by_byte_feeding_gives_the_same_frames():
     d = Decoder()
     out = [f for b in stream for f in d.feed(bytes([b]))]
     assert [f.kind.name for f in out] == ["ODOM", "IMU", "BATTERY"]
-    assert d.pending == 0 and d.stats.bytes_dropped == 0
+    assert d.pending == 0
+    assert d.stats.bytes_dropped == 0
 
 
 def test_partial_frame_waits_for_the_rest():
     frame = encode(proto.ODOM, (1.0, 2.0, 3.0, 0.1, 0.2))
     d = Decoder()
-    assert d.feed(frame[:2]) == [] and d.pending == 2
-    assert d.feed(frame[2:10]) == [] and d.pending == 10
-    assert len(d.feed(frame[10:])) == 1 and d.pending == 0
+    assert d.feed(frame[:2]) == []
+    assert d.pending == 2
+    assert d.feed(frame[2:10]) == []
+    assert d.pending == 10
+    assert len(d.feed(frame[10:])) == 1
+    assert d.pending == 0
 
 
 def _bad(type_code: int, length: int, payload: bytes) -> bytes:
@@ -119,7 +124,8 @@ def test_frame_hidden_after_a_rejected_sof_is_found():
     good = encode(proto.ODOM, (1.0, 2.0, 3.0, 0.0, 0.0))
     d = Decoder()
     assert d.feed(b"\x7e" + good) == [Frame(proto.ODOM, (1.0, 2.0, 3.0, 0.0, 0.0))]
-    assert d.stats.errors["unknown_type"] == 1 and d.stats.bytes_dropped == 1
+    assert d.stats.errors["unknown_type"] == 1
+    assert d.stats.bytes_dropped == 1
 
 
 def test_types_not_accepted_are_skipped_like_unknown_ones():
@@ -133,7 +139,8 @@ def test_reset_drops_a_partial_frame():
     d = Decoder()
     d.feed(encode(proto.IMU, (0, 0, 0, 0, 0, 9.8))[:10])
     d.reset()
-    assert d.pending == 0 and d.stats.bytes_dropped == 10
+    assert d.pending == 0
+    assert d.stats.bytes_dropped == 10
 
 
 # ---------------------------------------------------------------- properties

@@ -61,7 +61,8 @@ async def test_drive_and_stop(seed: Rig) -> None:
     seed.command(0.0)
     await seed.until(lambda: _still(seed), STOP_BOUND_S)
     assert seed.firmware.last_command == (0.0, 0.0)
-    assert seed.firmware.rx.frames > 0 and seed.bridge.stats()["firmware"] == "seed-2025"
+    assert seed.firmware.rx.frames > 0
+    assert seed.bridge.stats()["firmware"] == "seed-2025"
 
 
 @pytest.mark.parametrize("extra", range(1, 9))
@@ -110,7 +111,8 @@ async def test_negative_theta_reaches_odom_normalised(seed: Rig) -> None:
     await seed.run(0.5)
     await seed.settle()
     theta = seed.odom[-1].pose.theta
-    assert -math.pi <= theta < 0.0 and theta < -0.3
+    assert -math.pi <= theta < 0.0
+    assert theta < -0.3
     assert not seed.bridge.stats()["errors"]  # no frame rejected as implausible
 
 

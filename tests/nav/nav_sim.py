@@ -138,8 +138,13 @@ def settings_for(map_path: Path, start_place: str, **nav: Any) -> Settings:
 
 @asynccontextmanager
 async def running(settings: Settings, grid: OccupancyGrid, start: tuple[float, float, float],
-                  speed: float | None = 4.0, **sim_kw: Any):
-    """Start map_server, localization and navigator on a SimClock with the simulator stepping."""
+                  speed: float | None = None, **sim_kw: Any):
+    """Start map_server, localization and navigator on a SimClock with the simulator stepping.
+
+    By default the clock runs as fast as the machine computes (``speed`` None): planning and
+    localization are offloaded in lockstep with it, so no result depends on wall time or load.
+    A paced run (``speed`` > 0) would let the test's own steps land between simulator steps
+    differently on a quiet and on a busy machine."""
     from sage_robot.nav.localization import LocalizationNode
     from sage_robot.nav.map_server import MapServerNode
     from sage_robot.nav.navigator import NavigatorNode
@@ -163,12 +168,3 @@ async def running(settings: Settings, grid: OccupancyGrid, start: tuple[float, f
         for n in nodes:
             await n.teardown()
             await n._close()
-
-
-async def wait_until(clock: SimClock, cond: Any, timeout_s: float, what: str) -> None:
-    """Wait (simulated time, bounded) until ``cond()`` holds."""
-    t_end = clock.now() + timeout_s
-    while not cond():
-        if clock.now() > t_end:
-            raise AssertionError(f"timed out after {timeout_s} simulated s waiting for {what}")
-        await clock.sleep(0.1)

@@ -31,15 +31,16 @@ from sage_robot.core.msgs import Text, Twist
 from sage_robot.core.msgs.nav import NavigateGoal, TourGoal
 from sage_robot.core.node import Node, NodeContext
 from sage_robot.nav.navigator import NavigatorNode
-from sage_robot.web.teleop import DEADMAN_CHECK_S, Teleop
+from sage_robot.web.teleop import Teleop
 
-from .nav_grids import draw
+from ..support.grids import draw
+from ..support.waits import until
 from .nav_sim import running, settings_for, write_building
 
 CALL_BOUND_S = 0.5  # sending a goal, engaging the e-stop: wall seconds at most
 CANCEL_BOUND_S = CANCEL_WAIT_S + 1.0  # a cancel, including the handler's clean-up
 BURST_BOUND_S = 20.0  # ten offline answers in turn, wall s
-SETTLE_S = 5 * DEADMAN_CHECK_S  # wall time given to the loop between a step and its checks
+SETTLE_BOUND_S = 10.0  # wall s an invariant may take to hold after a step (teleop's checks are wall-clock)
 
 ROOMS = """
 ######################
@@ -100,8 +101,9 @@ class Robot(RuleBasedStateMachine):
 
         return self.loop.run_until_complete(bounded())
 
-    def settle(self) -> None:
-        self.loop.run_until_complete(asyncio.sleep(SETTLE_S))
+    def eventually(self, cond: Any, what: str) -> None:
+        """Run the loop until ``cond()`` holds (bounded): the nodes react to a step asynchronously."""
+        self.loop.run_until_complete(until(cond, what, SETTLE_BOUND_S))
 
     def _nav_active(self) -> list[GoalHandle]:
         return [h for a in (topics.NAVIGATE_TO, topics.TOUR) if (h := self.bus.actions.active(a)) is not None]
@@ -163,7 +165,8 @@ class Robot(RuleBasedStateMachine):
     def cancel(self, data: st.DataObject) -> None:
         handle = data.draw(st.sampled_from(self.handles))
         result = self.run(handle.cancel(), CANCEL_BOUND_S, f"cancel of goal {handle.goal_id}")
-        assert result.status.done and handle.done
+        assert result.status.done
+        assert handle.done
 
     @rule()
     def cancel_service(self) -> None:
@@ -176,7 +179,8 @@ class Robot(RuleBasedStateMachine):
         was = self.teleop.estop
         self.run(self.teleop.set_estop(engaged, "test"), CALL_BOUND_S, "set_estop")
         if engaged and not was:  # the wire first: the stop is out before the call returns
-            assert self.cmds and self.cmds[-1].is_zero
+            assert self.cmds
+            assert self.cmds[-1].is_zero
 
     @rule(which=st.sampled_from(("navigator", "brain")))
     def restart(self, which: str) -> None:
@@ -203,16 +207,15 @@ class Robot(RuleBasedStateMachine):
     # ------------------------------------------------------------ invariants
     @invariant()
     def stopped_without_a_goal(self) -> None:
-        self.settle()
-        if not self._nav_active() and self.cmds:
-            assert self.cmds[-1].is_zero, f"no goal is active but the robot was told {self.cmds[-1]}"
+        self.eventually(lambda: self._nav_active() or not self.cmds or self.cmds[-1].is_zero,
+                        "a stop command once no goal is active")
 
     @invariant()
     def estop_holds(self) -> None:
         if self.teleop.estop:
-            self.settle()
-            assert not [h for h in self._nav_active() if not h.cancel_requested], "a goal runs under e-stop"
-            assert not self.cmds or self.cmds[-1].is_zero
+            self.eventually(lambda: not [h for h in self._nav_active() if not h.cancel_requested],
+                            "every goal to be asked to stop under e-stop")
+            self.eventually(lambda: not self.cmds or self.cmds[-1].is_zero, "a stop command under e-stop")
 
     def teardown(self) -> None:
         try:

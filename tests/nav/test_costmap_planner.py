@@ -20,7 +20,7 @@ from sage_robot.nav.costmap import (
 )
 from sage_robot.nav.planner import NoPath, path_length, plan
 
-from .nav_grids import draw, room
+from ..support.grids import draw, room
 
 CORRIDOR = """
 ####################
@@ -91,7 +91,8 @@ def test_clear_obstacles() -> None:
 def test_plan_through_door_keeps_off_walls() -> None:
     cm = Costmap.from_grid(draw(CORRIDOR, 0.1, scale=5), 0.25, 0.55, 3.0)
     p = plan(cm, (1.0, 2.5), (9.0, 1.0))
-    assert np.allclose(p.points[0], (1.0, 2.5)) and np.allclose(p.points[-1], (9.0, 1.0))
+    assert np.allclose(p.points[0], (1.0, 2.5))
+    assert np.allclose(p.points[-1], (9.0, 1.0))
     assert (cm.cost_at(p.points[:, 0], p.points[:, 1]) < INSCRIBED).all()
     steps = np.hypot(*np.diff(p.points, axis=0).T)
     assert steps.max() < 0.06  # evenly resampled
@@ -135,7 +136,8 @@ def test_keepout_and_speed_masks_from_nav2(shared_data) -> None:
     speed = read_map(shared_data(base + "depot_speed.yaml"))
     cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0, keep, speed)
     zone = keep.data >= 65
-    assert zone.any() and (cm.cost[zone] == LETHAL).all()
+    assert zone.any()
+    assert (cm.cost[zone] == LETHAL).all()
     limited = (speed.data > 0) & (speed.data <= 100)
     assert limited.any()
     assert np.allclose(cm.speed[limited], speed.data[limited] / 100.0)

@@ -13,7 +13,7 @@ from sage_robot.nav.amcl import ParticleFilter
 from sage_robot.nav.amcl_global import KEEP_SHARE, hypotheses, keep_alive, search_region
 from sage_robot.nav.mapdata import load_for
 
-from .nav_grids import draw
+from ..support.grids import draw
 from .nav_raycast import RANGE_MAX_M, beam_angles, cast
 
 SENSOR = (0.0, 0.0, 0.0)
@@ -59,7 +59,10 @@ def test_search_region_keeps_to_the_free_space_that_holds_the_places() -> None:
     x = (cells[:, 1] + 0.5) * 0.05
     y = (cells[:, 0] + 0.5) * 0.05
     assert len(cells) > 0
-    assert x.min() > 1.0 and x.max() < 6.0 and y.min() > 1.0 and y.max() < 2.5  # inside the walls
+    assert x.min() > 1.0
+    assert x.max() < 6.0
+    assert y.min() > 1.0
+    assert y.max() < 2.5  # inside the walls
     assert pf.field.dist[cells[:, 0], cells[:, 1]].min() >= 0.2  # never against a wall
     everywhere = search_region(pf.field)  # no places: all clear free space, outside included
     assert len(everywhere) > 2 * len(cells)
@@ -76,8 +79,10 @@ def test_hypotheses_count_the_places_a_cloud_considers() -> None:
     w = np.full(len(cloud), 1.0 / len(cloud))
     h = hypotheses(cloud, w)
     assert len(h) == 2  # the ten strays form none
-    assert (round(h[0].x), round(h[0].y)) == (2, 2) and (round(h[1].x), round(h[1].y)) == (20, 9)
-    assert 0.55 < h[0].share < 0.62 and 0.36 < h[1].share < 0.42
+    assert (round(h[0].x), round(h[0].y)) == (2, 2)
+    assert (round(h[1].x), round(h[1].y)) == (20, 9)
+    assert 0.55 < h[0].share < 0.62
+    assert 0.36 < h[1].share < 0.42
     assert len(hypotheses(a, np.full(600, 1 / 600))) == 1
 
 
@@ -111,9 +116,11 @@ def test_keep_alive_holds_a_look_alike_that_fits_as_well_and_drops_one_that_does
     assert kept[runner].sum() / kept.sum() >= 1e-3  # and held at a share that still counts
     worse_fit = np.where(runner, -0.8, -0.5)
     q, boost = keep_alive(cloud, w, worse_fit)
-    assert q[runner].sum() < 1e-6 and np.allclose(boost, 1.0)  # ruled out: let go
+    assert q[runner].sum() < 1e-6
+    assert np.allclose(boost, 1.0)  # ruled out: let go
     q, boost = keep_alive(cloud, np.where(runner, 0.2, 1.0) / 400.0)  # a real runner-up (~1 %)
-    assert q[runner].sum() >= 0.99 * KEEP_SHARE and np.allclose(boost, 1.0)
+    assert q[runner].sum() >= 0.99 * KEEP_SHARE
+    assert np.allclose(boost, 1.0)
 
 
 def test_keep_alive_never_starves_the_leader_among_many_look_alikes() -> None:
@@ -168,6 +175,8 @@ def test_global_localization_in_the_default_building_converges_along_a_corridor(
         pf.update(truth, *_scan(data.grid, truth), force=True)
         e = pf.estimate()
         errors.append((math.hypot(e.x - truth[0], e.y - truth[1]), abs(wrap_angle(e.theta - truth[2]))))
-    assert max(d for d, _ in errors[-10:]) < 0.3 and max(a for _, a in errors[-10:]) < 0.1
-    assert len(pf.hypotheses()) == 1 and pf.spread_m() < 0.5
+    assert max(d for d, _ in errors[-10:]) < 0.3
+    assert max(a for _, a in errors[-10:]) < 0.1
+    assert len(pf.hypotheses()) == 1
+    assert pf.spread_m() < 0.5
     assert pf.count <= 2000  # the raised global cap has come back down

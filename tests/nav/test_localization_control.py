@@ -14,7 +14,7 @@ from sage_robot.nav.costmap import Costmap
 from sage_robot.nav.ekf import YawRateEkf
 from sage_robot.nav.planner import plan
 
-from .nav_grids import draw
+from ..support.grids import draw
 from .nav_raycast import RANGE_MAX_M, beam_angles, cast
 
 # An L-shaped floor with a pillar and alcoves: no two places look the same to a lidar.
@@ -153,7 +153,9 @@ def test_pure_pursuit_reaches_goal_never_reverses(grid) -> None:
 
 def test_rotates_in_place_when_facing_away(grid) -> None:
     _, cmds, _ = _follow(grid, (3.0, 6.0, math.pi), (8.0, 6.0), None, steps=5)
-    assert cmds[0].rotating and cmds[0].v == 0.0 and cmds[0].w != 0.0
+    assert cmds[0].rotating
+    assert cmds[0].v == 0.0
+    assert cmds[0].w != 0.0
 
 
 def test_forward_collision_check_stops_before_a_person(grid) -> None:
@@ -163,7 +165,9 @@ def test_forward_collision_check_stops_before_a_person(grid) -> None:
     cm.update_scan((2.0, 6.0, 0.0), ang, cast(grid, (2.0, 6.0, 0.0), ang, [(2.9, 6.0, 0.25)]), RANGE_MAX_M)
     ctl = PurePursuit(p.points, ControllerParams(), None)
     c = ctl.step((2.0, 6.0, 0.0), cm)
-    assert c.blocked and c.v == 0.0 and c.w == 0.0
+    assert c.blocked
+    assert c.v == 0.0
+    assert c.w == 0.0
 
 
 def test_speed_zone_limits_speed(grid) -> None:
@@ -178,10 +182,13 @@ def test_escape_heading_leads_away_from_a_wall_the_robot_is_too_close_to(grid) -
     pose = (5.0, 0.7, 0.0)  # 0.2 m from the bottom wall: inside the 0.25 m inscribed radius
     assert cm.distance_at(5.0, 0.7) < cm.inscribed_m
     heading = escape_heading(cm, pose, 0.5, prefer=0.0)
-    assert heading is not None and 0.0 < heading < math.pi  # away from the wall (+y)
+    assert heading is not None
+    assert 0.0 < heading < math.pi  # away from the wall (+y)
     dist = [cm.distance_at(5.0 + s * math.cos(heading), 0.7 + s * math.sin(heading)) for s in (0.1, 0.3, 0.5)]
-    assert dist == sorted(dist) and dist[-1] > cm.inscribed_m
+    assert dist == sorted(dist)
+    assert dist[-1] > cm.inscribed_m
     # of the headings that leave, the one nearer the preferred direction wins
     left = escape_heading(cm, pose, 0.5, prefer=math.pi)
-    assert left is not None and left > heading
+    assert left is not None
+    assert left > heading
 

@@ -16,6 +16,7 @@ from sage_robot.core import topics
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs import Event, Odometry
 from sage_robot.core.msgs.nav import LocalizationHealth, NavigateFeedback, NavigateGoal, NavState
+from sage_robot.sim.node import WORLD_RESOURCE
 
 NODES = ["sim_world", "mcu_sim", "serial_bridge", "map_server", "localization", "navigator"]
 SIM_LIMIT_S = 200.0  # simulated seconds before the run gives up (the drive takes ~100)
@@ -54,11 +55,13 @@ async def test_dock_to_cafe_on_the_real_simulator() -> None:
 
     launcher = await asyncio.wait_for(run_launcher(ctx, specs, until=SIM_LIMIT_S, after_start=after_start),
                                       WALL_LIMIT_S)  # fmt: skip
-    assert result and result[0].ok, (result, [(e.kind, e.message) for e in events])
+    assert result, (result, [(e.kind, e.message) for e in events])
+    assert result[0].ok, (result, [(e.kind, e.message) for e in events])
     kinds = [e.kind for e in events if e.source == "navigator"]
     assert kinds == ["arrived"], kinds  # no lost, no blocked_by_people on the way
-    assert not lost and NavState.LOST not in states
-    assert ctx.resources["sim_world"].collisions == 0
+    assert not lost
+    assert NavState.LOST not in states
+    assert ctx.resources[WORLD_RESOURCE].collisions == 0
     x, y = truth[-1]
     assert math.hypot(x - CAFE[0], y - CAFE[1]) <= ARRIVED_TRUTH_M
     assert not any(h.restarts for h in launcher.health.values())

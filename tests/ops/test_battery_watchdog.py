@@ -1,6 +1,5 @@
 """Battery watchdog: thresholds, hysteresis, events and e-mail through a real SMTP server."""
 
-import asyncio
 import socket
 
 import numpy as np
@@ -13,6 +12,8 @@ from sage_robot.core.clock import SimClock
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs import BatteryState, Event
 from sage_robot.core.node import NodeContext
+
+from ..support.waits import sim_step_until, until
 
 
 def test_hysteresis_does_not_flap():
@@ -77,14 +78,6 @@ async def feed(bus, clock, fractions):
         await clock.step(0.02)
 
 
-async def wait_for(cond, seconds=5.0):
-    for _ in range(int(seconds / 0.05)):
-        if cond():
-            return
-        await asyncio.sleep(0.05)
-    raise AssertionError("condition not met in time")
-
-
 async def test_low_battery_event_and_one_mail(smtp):
     port, inbox = smtp
     node, bus, clock = make_node(port)
@@ -92,12 +85,13 @@ async def test_low_battery_event_and_one_mail(smtp):
     bus.subscribe("/sage/events", Event, events.append)
     await node.setup()
     await feed(bus, clock, [0.5, 0.3, 0.24, 0.26, 0.24, 0.23])  # jitter around 25 %
-    await wait_for(lambda: len(inbox.messages) == 1)
+    await until(lambda: len(inbox.messages) == 1)
     await feed(bus, clock, [0.09, 0.08])
-    await wait_for(lambda: len(inbox.messages) == 2)
+    await until(lambda: len(inbox.messages) == 2)
     kinds = [e.kind for e in events]
     assert kinds == ["battery_low", "battery_critical"]
-    assert b"Battery critical" in inbox.messages[1] and b"ops@example.org" in inbox.messages[1]
+    assert b"Battery critical" in inbox.messages[1]
+    assert b"ops@example.org" in inbox.messages[1]
     await node._close()
 
 
@@ -105,9 +99,8 @@ async def test_dead_mail_server_never_stops_the_node():
     node, bus, clock = make_node(free_port())  # nothing listens there
     await node.setup()
     await feed(bus, clock, [0.2])
-    for _ in range(40):  # retries back off on the simulated clock
-        await clock.step(1.0)
-        await asyncio.sleep(0.01)
-    await wait_for(lambda: node.mails_failed == 1)
+    # Retries back off on the simulated clock (2 + 4 + 8 s); each attempt runs in a thread.
+    await sim_step_until(clock, lambda: node.mails_failed == 1, "the mail to be given up", 60.0,
+                         step_s=1.0, real_pause_s=0.01)
     assert node.stats()["level"] == "warn"
     await node._close()

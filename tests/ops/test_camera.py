@@ -13,22 +13,20 @@ from sage_robot.core.msgs import CompressedImage
 from sage_robot.core.node import NodeContext
 from sage_robot.hardware.camera import CameraNode
 
+from ..support.waits import WAIT_S, until
+
 
 async def test_absent_camera_is_reported_clearly(tmp_path):
     settings = load_profile(None, {"camera": {"device": str(tmp_path / "video9")}})
     bus = Bus(WallClock())
     node = CameraNode(NodeContext(bus, bus.clock, settings))
     await node.setup()
-    for _ in range(200):  # the first attempt runs in the background: up to 10 s on a busy machine
-        if node.stats()["last_error"]:
-            break
-        await asyncio.sleep(0.05)
+    # the first attempt runs in the background
+    await until(lambda: node.stats()["last_error"], "the camera's first attempt to fail", WAIT_S)
     stats = node.stats()
-    assert (
-        not stats["connected"]
-        and "not found" in stats["last_error"]
-        and "camera.device" in stats["last_error"]
-    )
+    assert not stats["connected"]
+    assert "not found" in stats["last_error"]
+    assert "camera.device" in stats["last_error"]
     await node.teardown()
 
 
@@ -57,4 +55,5 @@ async def test_frames_are_scaled_to_the_seed_stream_and_jpeg():
     msg = await asyncio.wait_for(sub.get(), 5)
     await node.teardown()
     img = Image.open(io.BytesIO(msg.data))
-    assert img.format == "JPEG" and img.size == (480, 270)
+    assert img.format == "JPEG"
+    assert img.size == (480, 270)

@@ -25,7 +25,8 @@ def test_no_robot_attached_is_reported_clearly(tmp_path):
     text = out.stdout
     for name in ("mcu", "lidar", "camera", "network", "disk", "llm"):
         assert f"] {name}" in text
-    assert "absent" in text and "fix:" in text
+    assert "absent" in text
+    assert "fix:" in text
     assert "Traceback" not in out.stdout + out.stderr
 
 
@@ -40,7 +41,8 @@ def test_emulated_mcu_and_lidar_are_found_and_talking():
         finally:
             lidar.close()
     assert checks["mcu"].ok, checks["mcu"].detail
-    assert "frames/s" in checks["mcu"].detail and "ODOM" in checks["mcu"].detail
+    assert "frames/s" in checks["mcu"].detail
+    assert "ODOM" in checks["mcu"].detail
     assert checks["lidar"].ok, checks["lidar"].detail
     assert "spinning" in checks["lidar"].detail
 
@@ -48,5 +50,7 @@ def test_emulated_mcu_and_lidar_are_found_and_talking():
 def test_a_wake_head_that_is_not_there_is_named(tmp_path):
     settings = load_profile(None, {"voice": {"wake_heads": {"hey_jarvis": str(tmp_path / "gone.npz")}}})
     models = next(c for c in run_checks(settings) if c.name == "models")
-    assert not models.ok and "gone.npz: no such file" in models.detail
-    assert models.fix and "wake_heads" in models.fix
+    assert not models.ok
+    assert "gone.npz: no such file" in models.detail
+    assert models.fix
+    assert "wake_heads" in models.fix

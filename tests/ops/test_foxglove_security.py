@@ -80,8 +80,11 @@ async def refused(url: str, **kwargs: Any) -> tuple[int, str]:
 
 def test_foxglove_listens_on_loopback_by_default() -> None:
     assert load_profile(None).ops.foxglove_host == "127.0.0.1"
-    assert is_loopback_host("127.0.0.1") and is_loopback_host("::1") and is_loopback_host("localhost")
-    assert not is_loopback_host("0.0.0.0") and not is_loopback_host("robot.lan")
+    assert is_loopback_host("127.0.0.1")
+    assert is_loopback_host("::1")
+    assert is_loopback_host("localhost")
+    assert not is_loopback_host("0.0.0.0")
+    assert not is_loopback_host("robot.lan")
 
 
 async def test_loopback_view_checks_the_browser_origin(loopback_node: FoxgloveNode) -> None:
@@ -102,9 +105,11 @@ async def test_network_view_requires_the_token(network_node: FoxgloveNode) -> No
     base = f"ws://127.0.0.1:{network_node.port}"
     token = foxglove_token(PASSWORD)
     status, body = await refused(base)
-    assert status == 401 and "token is required" in body
+    assert status == 401
+    assert "token is required" in body
     status, body = await refused(f"{base}/?token={'0' * len(token)}")
-    assert status == 401 and "wrong token" in body
+    assert status == 401
+    assert "wrong token" in body
     status, _ = await refused(f"{base}/?token={token}", origin="https://evil.example")
     assert status == 403  # a valid token from a foreign page is still refused
     assert (await server_info(f"{base}/?token={token}"))["name"] == "SAGE"
@@ -115,8 +120,10 @@ async def test_network_view_requires_the_token(network_node: FoxgloveNode) -> No
 
 def test_token_is_stable_secret_dependent_and_stripped_before_the_sdk() -> None:
     token = foxglove_token(PASSWORD)
-    assert token == foxglove_token(PASSWORD) and token != foxglove_token(PASSWORD + "x")
-    assert PASSWORD not in token and len(token) == 32
+    assert token == foxglove_token(PASSWORD)
+    assert token != foxglove_token(PASSWORD + "x")
+    assert PASSWORD not in token
+    assert len(token) == 32
     head = (
         f"GET /live?a=1&token={token}&b=2 HTTP/1.1\r\nHost: robot:8765\r\n"
         f"Authorization: Bearer {token}\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n"
@@ -126,4 +133,5 @@ def test_token_is_stable_secret_dependent_and_stripped_before_the_sdk() -> None:
     forwarded = request.forwarded().decode()
     assert token not in forwarded
     assert forwarded.startswith("GET /live?a=1&b=2 HTTP/1.1\r\n")
-    assert "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n" in forwarded and forwarded.endswith("\r\n\r\n")
+    assert "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n" in forwarded
+    assert forwarded.endswith("\r\n\r\n")

@@ -78,7 +78,8 @@ def test_mcap_round_trip_with_ros2_schemas(tmp_path):
     for topic, msg in MESSAGES:
         got = back[topic]
         if isinstance(msg, (Odometry, PoseWithCovariance)):
-            assert got.pose.x == pytest.approx(msg.pose.x) and got.pose.theta == pytest.approx(msg.pose.theta)
+            assert got.pose.x == pytest.approx(msg.pose.x)
+            assert got.pose.theta == pytest.approx(msg.pose.theta)
         elif isinstance(msg, LaserScan):
             assert np.allclose(got.ranges, msg.ranges)
         elif isinstance(msg, BatteryState):
@@ -86,10 +87,12 @@ def test_mcap_round_trip_with_ros2_schemas(tmp_path):
         elif isinstance(msg, Imu):
             assert got.linear_acceleration == pytest.approx(msg.linear_acceleration)
         elif isinstance(msg, OccupancyGrid):
-            assert np.array_equal(got.data, msg.data) and got.resolution == pytest.approx(msg.resolution)
+            assert np.array_equal(got.data, msg.data)
+            assert got.resolution == pytest.approx(msg.resolution)
             assert got.origin == msg.origin
         elif isinstance(msg, Path):
-            assert len(got.poses) == 2 and got.poses[1].theta == pytest.approx(0.7)
+            assert len(got.poses) == 2
+            assert got.poses[1].theta == pytest.approx(0.7)
         else:
             assert got == msg
 
@@ -116,7 +119,8 @@ async def test_recorder_node_records_bus_traffic(tmp_path):
         await clock.step(0.1)
     await node.teardown()
     topics = [t for t, _, _ in read_mcap(tmp_path / "live.mcap")]
-    assert topics.count("/odom") == 5 and "/not_recorded" not in topics
+    assert topics.count("/odom") == 5
+    assert "/not_recorded" not in topics
 
 
 async def test_foxglove_server_advertises_live_topics():

@@ -9,12 +9,12 @@ import pytest
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import WallClock
 from sage_robot.core.config import load_profile
-from sage_robot.core.msgs import LaserScan
+from sage_robot.core.msgs import DiagnosticStatus, LaserScan, Level
 from sage_robot.core.node import NodeContext
 from sage_robot.hardware.emulators.rplidar import RplidarEmulator
 from sage_robot.hardware.rplidar import protocol as p
 from sage_robot.hardware.rplidar.driver import RplidarDriver, revolution_to_scan
-from sage_robot.hardware.rplidar.node import LidarNode
+from sage_robot.hardware.rplidar.node import LIDAR_STATUS, LidarNode
 
 
 def test_sample_encoding_by_hand():
@@ -42,7 +42,8 @@ def emulator():
 def test_session_info_health_and_scan(emulator):
     with RplidarDriver(emulator.port_name) as lidar:
         info = lidar.info()
-        assert info.model == 0x18 and info.firmware == (1, 29)
+        assert info.model == 0x18
+        assert info.firmware == (1, 29)
         assert lidar.health() == ("good", 0)
         revs = []
         for rev in lidar.revolutions():
@@ -80,7 +81,10 @@ async def test_lidar_node_publishes_scans_and_survives_a_dead_port(emulator, tmp
 
     dead = load_profile(None, {"lidar": {"port": str(tmp_path / "ttyUSB9"), "reconnect_s": 0.2}})
     node = LidarNode(NodeContext(bus, bus.clock, dead))
+    statuses = bus.subscribe(LIDAR_STATUS, DiagnosticStatus)
     await node.setup()
-    await asyncio.sleep(0.5)
+    for _ in range(2):  # the first attempt fails, and the node keeps retrying
+        status = await asyncio.wait_for(statuses.get(), 5)
+        assert status.level is Level.ERROR, status
     assert not node.stats()["connected"]
     await node.teardown()

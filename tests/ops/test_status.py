@@ -10,7 +10,9 @@ from sage_robot.core.bus import Bus
 from sage_robot.core.clock import WallClock
 from sage_robot.core.config import load_profile
 from sage_robot.core.node import Node, NodeContext
-from sage_robot.web.node import WebNode
+from sage_robot.web.node import WEB_URL, WebNode
+
+from ..support.waits import until
 
 
 class Broken(Node):
@@ -29,11 +31,7 @@ async def test_status_prints_every_node_and_fails_on_a_broken_one():
     )
     await launcher.start()
     try:
-        for _ in range(100):
-            if ctx.resources.get("web_url"):
-                break
-            await asyncio.sleep(0.05)
-        url = ctx.resources["web_url"]
+        url = await until(lambda: ctx.resources.get(WEB_URL), "the web server's address")
         proc = await asyncio.create_subprocess_exec(
             sys.executable,
             "-m",
@@ -49,8 +47,10 @@ async def test_status_prints_every_node_and_fails_on_a_broken_one():
         await launcher.stop()
     text = out.decode()
     assert proc.returncode == 1, err.decode()
-    assert "heartbeat" in text and "running" in text
-    assert "broken" in text and ("backoff" in text or "starting" in text)
+    assert "heartbeat" in text
+    assert "running" in text
+    assert "broken" in text
+    assert "backoff" in text or "starting" in text
 
 
 def test_status_without_a_robot_is_one_clear_line():
@@ -61,4 +61,5 @@ def test_status_without_a_robot_is_one_clear_line():
         timeout=60,
     )
     assert out.returncode == 2
-    assert "no robot answers" in out.stderr and "Traceback" not in out.stderr
+    assert "no robot answers" in out.stderr
+    assert "Traceback" not in out.stderr

@@ -51,7 +51,9 @@ def test_all_seed_places_with_descriptions_validate(campus_grid: OccupancyGrid) 
     places = load_places(package_data("maps", "campus", "waypoints.yaml"))
     assert set(places.names()) == SEED_PLACES
     for p in places:
-        assert p.description and p.aliases and p.dwell_text, p.name
+        assert p.description, p.name
+        assert p.aliases, p.name
+        assert p.dwell_text, p.name
     validate_places(places, campus_grid)  # raises naming the place on a wall or outside
 
 
@@ -65,7 +67,8 @@ def test_spoken_names_resolve() -> None:
     }  # fmt: skip
     for text, name in spoken.items():
         found = places.resolve(text)
-        assert found is not None and found.name == name, text
+        assert found is not None, text
+        assert found.name == name, text
 
 
 def test_corridors_are_as_long_and_wide_as_the_seeds() -> None:
@@ -76,7 +79,8 @@ def test_corridors_are_as_long_and_wide_as_the_seeds() -> None:
     assert xs.max() - xs.min() >= 90.0  # east-west, ~100 m
     assert ys.max() - ys.min() >= 70.0  # north-south, ~80 m
     widths = {round(2 * h, 2) for _, _, h in lanes["edges"] if h > 0.5}
-    assert min(widths) >= 1.8 and max(widths) <= 3.0
+    assert min(widths) >= 1.8
+    assert max(widths) <= 3.0
 
 
 def test_every_place_is_reachable_with_inflation(campus_grid: OccupancyGrid) -> None:
@@ -106,7 +110,8 @@ def test_docking_station_is_the_initial_pose() -> None:
 def test_clutter_is_off_the_walking_lanes_and_places() -> None:
     world = yaml.safe_load(package_data("maps", "campus", "world.yaml").read_text())
     boxes = [low_obstacle(c, "test") for c in world["low_obstacles"]]
-    assert boxes and all(b.height_m < 0.527 for b in boxes)  # below the lidar
+    assert boxes
+    assert all(b.height_m < 0.527 for b in boxes)  # below the lidar
     arr = np.array([[b.x, b.y, b.length_m, b.depth_m, b.yaw] for b in boxes])
     lanes = build_lanes()
     nodes = np.array(lanes["nodes"])

@@ -11,6 +11,8 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+import pytest
+
 WALL_FIELDS = ("wall_time_s", "real_time_factor")  # the only fields allowed to differ
 HOG = "import time\nt = time.monotonic()\nwhile time.monotonic() - t < 120: pass"
 
@@ -26,10 +28,10 @@ def cpu_hogs(n: int) -> Iterator[None]:
             p.wait(10)
 
 
-def _summary() -> dict[str, object]:
+def _summary(*pace: str) -> dict[str, object]:
     out = subprocess.run(
-        [sys.executable, "-m", "sage_robot.cli.main", "sim", "--headless", "--fast", "--scenario",
-         "crowded_corridor", "--seed", "3", "--duration", "40", "--json"],
+        [sys.executable, "-m", "sage_robot.cli.main", "sim", "--headless", *(pace or ("--fast",)),
+         "--scenario", "crowded_corridor", "--seed", "3", "--duration", "40", "--json"],
         capture_output=True, text=True, timeout=300,
     )
     assert out.returncode == 0, out.stderr[-2000:]
@@ -39,10 +41,27 @@ def _summary() -> dict[str, object]:
     return summary
 
 
-def test_the_same_seed_gives_the_same_run_on_a_quiet_and_a_loaded_machine() -> None:
-    quiet = _summary()
+@pytest.fixture(scope="module")
+def quiet() -> dict[str, object]:
+    summary = _summary()
+    assert summary["distance_m"], summary  # the robot drove: a real comparison
+    assert summary["goals"], summary
+    return summary
+
+
+def _same(first: dict[str, object], second: dict[str, object]) -> None:
+    assert first.keys() == second.keys()
+    for field in first:
+        assert second[field] == first[field], f"{field}: {first[field]!r} then {second[field]!r}"
+
+
+def test_the_same_seed_gives_the_same_run_on_a_quiet_and_a_loaded_machine(quiet: dict[str, object]) -> None:
     with cpu_hogs(2):
         loaded = _summary()
-    assert quiet["distance_m"] and quiet["goals"], quiet  # the robot drove: a real comparison
-    for field in quiet:
-        assert loaded[field] == quiet[field], f"{field}: {quiet[field]!r} then {loaded[field]!r}"
+    _same(quiet, loaded)
+
+
+def test_a_paced_run_gives_the_same_run_as_a_fast_one(quiet: dict[str, object]) -> None:
+    """--speed 10 sleeps between steps (and slows down where the machine cannot keep up):
+    the same simulated run, only spread over more wall time."""
+    _same(quiet, _summary("--speed", "10"))

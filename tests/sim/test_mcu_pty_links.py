@@ -8,11 +8,12 @@ import select
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from sage_robot.sim.firmware import FirmwareModel
 from sage_robot.sim.mcu_pty import PtyMcu, remove_stale_links, runtime_dir
+
+from ..support.waits import wait_until
 
 WAIT_S = 20.0  # bound on the child starting (imports numpy) and dying
 
@@ -23,7 +24,7 @@ from sage_robot.sim.firmware import FirmwareModel
 from sage_robot.sim.mcu_pty import PtyMcu
 pty = PtyMcu(FirmwareModel(), Path(sys.argv[1]))
 print(pty.port_name, flush=True)
-time.sleep(600)
+time.sleep(600)  # a live owner, until the test kills it
 """
 
 
@@ -50,7 +51,8 @@ def test_a_killed_owners_link_is_removed_by_the_next_start(tmp_path: Path) -> No
     base.mkdir(mode=0o700)
     child, link = _start_child(base)
     try:
-        assert link.is_symlink() and link.parent.parent == base
+        assert link.is_symlink()
+        assert link.parent.parent == base
         assert link.parent.name.startswith(f"mcu-{child.pid}-")
     finally:
         _kill9(child)
@@ -77,11 +79,10 @@ def test_live_owners_and_other_entries_are_kept(tmp_path: Path) -> None:
         assert other.is_dir()
     finally:
         _kill9(child)
-    deadline = time.monotonic() + WAIT_S  # the kernel may take a moment to reap the PID
-    removed: list[Path] = []
-    while not removed and time.monotonic() < deadline:
-        removed = remove_stale_links(base)
-    assert removed == [link.parent] and other.is_dir()
+    # the kernel may take a moment to reap the PID
+    removed = wait_until(lambda: remove_stale_links(base), "the dead owner's link to be removed", WAIT_S)
+    assert removed == [link.parent]
+    assert other.is_dir()
 
 
 def test_the_runtime_dir_is_private(monkeypatch, tmp_path: Path) -> None:
@@ -89,11 +90,13 @@ def test_the_runtime_dir_is_private(monkeypatch, tmp_path: Path) -> None:
     base = runtime_dir()
     assert base == tmp_path / "sage"
     st = base.stat()
-    assert st.st_uid == os.getuid() and st.st_mode & 0o777 == 0o700
+    assert st.st_uid == os.getuid()
+    assert st.st_mode & 0o777 == 0o700
     base.chmod(0o777)  # someone else could put links there: not used
     assert runtime_dir() is None
     pty = PtyMcu(FirmwareModel())  # falls back to a fresh private temp dir
     try:
-        assert Path(pty.port_name).is_symlink() and not str(pty.port_name).startswith(str(base))
+        assert Path(pty.port_name).is_symlink()
+        assert not str(pty.port_name).startswith(str(base))
     finally:
         pty.close()

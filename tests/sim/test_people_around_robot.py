@@ -57,6 +57,7 @@ def test_a_walker_on_the_lanes_turns_back_when_the_robot_fills_the_corridor() ->
             stuck_at = p.x
         westmost = min(westmost, p.x)
         closest = min(closest, math.hypot(p.x - robot[0], p.y - robot[1]))
-    assert stuck_at is not None and stuck_at < ROBOT_X_M  # it waited in front of the robot first
+    assert stuck_at is not None
+    assert stuck_at < ROBOT_X_M  # it waited in front of the robot first
     assert westmost < stuck_at - 3.0  # then walked back the way it came
     assert closest >= PERSON_RADIUS_M + ROBOT_RADIUS_M + ROBOT_GAP_M - 1e-6

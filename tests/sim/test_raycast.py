@@ -7,11 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from sage_robot.core.msgs import OccupancyGrid, Pose2D
 from sage_robot.sim import raycast
 from sage_robot.sim.raycast import GridRaycaster, ray_boxes, ray_circles
 
-from .simgrids import grid_from_art
+from ..support.grids import draw, grid_of
 
 EAST, NORTH, WEST, SOUTH = 0.0, math.pi / 2, math.pi, -math.pi / 2
 
@@ -26,14 +25,14 @@ ROOM = """
 
 
 def test_distances_to_walls_in_a_room() -> None:
-    rc = GridRaycaster(grid_from_art(ROOM))
+    rc = GridRaycaster(draw(ROOM, 1.0))
     # From (1.5, 1.5): east wall starts at x = 9, north wall at y = 5, west at x = 1, south at y = 1.
     r = rc.cast(1.5, 1.5, np.array([EAST, NORTH, WEST, SOUTH]), 20.0)
     assert r == pytest.approx([7.5, 3.5, 0.5, 0.5], abs=1e-3)
 
 
 def test_a_pillar_blocks_and_diagonals_are_exact() -> None:
-    rc = GridRaycaster(grid_from_art(ROOM))
+    rc = GridRaycaster(draw(ROOM, 1.0))
     # The pillar is the cell x in [4, 5), y in [2, 3): the fourth line of the drawing is row 2.
     r = rc.cast(2.5, 2.5, np.array([EAST]), 20.0)
     assert r[0] == pytest.approx(1.5, abs=1e-3)
@@ -43,17 +42,17 @@ def test_a_pillar_blocks_and_diagonals_are_exact() -> None:
 
 
 def test_max_range_and_open_space_give_inf() -> None:
-    rc = GridRaycaster(grid_from_art(ROOM))
+    rc = GridRaycaster(draw(ROOM, 1.0))
     assert math.isinf(rc.cast(1.5, 1.5, np.array([EAST]), 5.0)[0])
-    open_grid = grid_from_art("""
+    open_grid = draw("""
         ....
         ....
-    """)
+    """, 1.0)
     assert np.isinf(GridRaycaster(open_grid).cast(1.0, 1.0, np.array([0.0, 1.0, 2.0]), 50.0)).all()
 
 
 def test_origin_and_resolution_are_honoured() -> None:
-    g = grid_from_art(ROOM, resolution=0.1, origin=(-3.0, 2.0))
+    g = draw(ROOM, 0.1, origin=(-3.0, 2.0))
     rc = GridRaycaster(g)
     # Same geometry scaled by 0.1 and shifted.
     r = rc.cast(-3.0 + 0.15, 2.0 + 0.15, np.array([EAST, NORTH]), 5.0)
@@ -63,7 +62,7 @@ def test_origin_and_resolution_are_honoured() -> None:
 def test_rotated_map_origin() -> None:
     data = np.zeros((10, 10), dtype=np.int8)
     data[:, 9] = 100  # the wall at grid x in [9, 10)
-    g = OccupancyGrid(0.0, "map", 1.0, Pose2D(0.0, 0.0, math.pi / 2), data)
+    g = grid_of(data, 1.0, theta=math.pi / 2)
     # Grid +x points along map +y: from map (-0.5, 0.5), grid (0.5, 0.5); the wall is 8.5 ahead along map +y.
     r = GridRaycaster(g).cast(-0.5, 0.5, np.array([math.pi / 2]), 20.0)
     assert r[0] == pytest.approx(8.5, abs=1e-3)
@@ -107,7 +106,7 @@ def test_ray_boxes() -> None:
 
 
 def test_clearance_is_distance_to_the_nearest_wall(campus_raycaster: GridRaycaster) -> None:
-    rc = GridRaycaster(grid_from_art(ROOM))
+    rc = GridRaycaster(draw(ROOM, 1.0))
     assert rc.clearance(1.5, 1.5)[0] == pytest.approx(0.5, abs=0.01)
     assert rc.clearance(6.5, 2.5)[0] == pytest.approx(1.5, abs=0.01)
     assert math.isinf(rc.clearance(-5.0, -5.0)[0])  # outside the map

@@ -65,8 +65,11 @@ def test_bad_scenarios_say_what_is_wrong(tmp_path: Path, text: str, message: str
 
 def test_scenario_fields_and_overrides(tmp_path: Path) -> None:
     sc = load_scenario(write(tmp_path, BENCH_RUN + "map: other/map.yaml\nduration_s: 5\nbattery: 0.4\n"))
-    assert sc.name == "bench_in_the_way" and sc.duration_s == 5.0 and sc.battery == 0.4
-    assert sc.clutter[0].name == "test_bench" and sc.events[0].value == (0.5, 0.0)
+    assert sc.name == "bench_in_the_way"
+    assert sc.duration_s == 5.0
+    assert sc.battery == 0.4
+    assert sc.clutter[0].name == "test_bench"
+    assert sc.events[0].value == (0.5, 0.0)
     over = sc.settings_overrides()
     assert over["sim"] == {"world_map": str(tmp_path / "other/map.yaml"), "seed": 4, "pedestrians": 0}
     assert over["nav"]["map"] == str(tmp_path / "other/map.yaml")
@@ -95,18 +98,21 @@ async def test_world_node_runs_a_scenario_on_the_sim_clock() -> None:
     world = ctx.resources[WORLD_RESOURCE]
     assert 58 <= len(got[topics.SCAN]) <= 61  # 10 Hz
     assert 290 <= len(got[topics.SIM_TRUTH]) <= 301  # 50 Hz
-    assert got[topics.CAMERA] and got[topics.SIM_PEOPLE]
+    assert got[topics.CAMERA]
+    assert got[topics.SIM_PEOPLE]
     # The robot drove east from the dock into the bench; the lidar never saw the bench.
     assert world.collisions == 1
     (event,) = got[topics.SIM_COLLISIONS]
-    assert event.kind == "collision" and event.data["name"] == "low_obstacle:test_bench"
+    assert event.kind == "collision"
+    assert event.data["name"] == "low_obstacle:test_bench"
     assert world.x == pytest.approx(50.0 - 0.225 - 0.25, abs=0.02)
     last = got[topics.SCAN][-1]
     ahead = last.ranges[np.argmin(np.abs(last.angles))]
     assert ahead > 1.0  # the corridor's far wall (1.6 m), not the bench 0.1 m away
     # The stander 2.4 m north-east is "the speaker" once the robot is within 3 m.
     assert got[topics.SIM_SPEAKER][-1].present
-    assert got[topics.SIM_SPEAKER_BEARING] and got[topics.SIM_SPEAKER_BEARING][-1].source == "sim"
+    assert got[topics.SIM_SPEAKER_BEARING]
+    assert got[topics.SIM_SPEAKER_BEARING][-1].source == "sim"
     assert 90.0 < got[topics.SIM_SPEAKER_BEARING][-1].angle_deg < 180.0  # ahead and to the left
 
 
@@ -128,7 +134,8 @@ def test_sage_sim_headless_runs_a_scenario_and_prints_a_summary(tmp_path: Path) 
     assert summary["collisions_by_kind"] == {"low_obstacle": 1}
     assert summary["pose"][0] == pytest.approx(50.0 - 0.225 - 0.25, abs=0.03)  # stopped at the bench
     assert summary["distance_m"] > 2.0
-    assert summary["nodes_failed"] == [] and summary["real_time_factor"] > 0
+    assert summary["nodes_failed"] == []
+    assert summary["real_time_factor"] > 0
 
 
 @pytest.mark.parametrize("watched", [False, True])
@@ -140,7 +147,8 @@ async def test_the_camera_renders_only_for_a_subscriber(watched: bool) -> None:
         ctx.bus.subscribe(topics.CAMERA, CompressedImage, frames.append, maxsize=100)
     launcher = await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=2.0)
     rendered = launcher.nodes["sim_world"].frames  # type: ignore[attr-defined]
-    assert (rendered > 0) is watched and len(frames) == rendered
+    assert (rendered > 0) is watched
+    assert len(frames) == rendered
 
 
 def test_headless_sets_no_camera_frames() -> None:
@@ -176,7 +184,8 @@ def test_headless_runs_open_no_listeners_and_print_a_tidy_summary(capsys: Any) -
 def test_sage_sim_reports_a_bad_scenario_in_one_line(tmp_path: Path) -> None:
     proc = run_cli("sim", "--headless", "--scenario", str(write(tmp_path, "events: 3\n")), timeout=60)
     assert proc.returncode == 2
-    assert proc.stderr.strip().startswith("sage: error:") and "Traceback" not in proc.stderr
+    assert proc.stderr.strip().startswith("sage: error:")
+    assert "Traceback" not in proc.stderr
 
 
 def test_bundled_scenarios_load_and_build() -> None:
@@ -225,7 +234,8 @@ async def test_teleop_through_the_serial_bridge_and_firmware_follows_direct_driv
     the ideal direct drive does: a loose drive chain (over-rotated turn) hits the wall."""
     direct = await _teleop_end(("sim_world",))
     chain = await _teleop_end(("sim_world", "mcu_sim", "serial_bridge"))
-    assert direct.collisions == 0 and chain.collisions == 0
+    assert direct.collisions == 0
+    assert chain.collisions == 0
     assert math.hypot(chain.x - direct.x, chain.y - direct.y) < 0.3, (chain.pose, direct.pose)
     assert abs(wrap_angle(chain.pose[2] - direct.pose[2])) < math.radians(1.0)
 
@@ -234,9 +244,11 @@ def test_web_addresses_and_node_selection_errors() -> None:
     from sage_robot.cli.run import web_addresses
 
     urls = web_addresses(load_profile(None, {"web": {"port": 8123}}))
-    assert urls[0] == "http://localhost:8123/" and all(u.startswith("http://localhost:8123/") for u in urls)
+    assert urls[0] == "http://localhost:8123/"
+    assert all(u.startswith("http://localhost:8123/") for u in urls)
     proc = run_cli("sim", "--headless", "--nodes", "sim_world,warp_drive", "--duration", "1", timeout=60)
-    assert proc.returncode == 2 and "warp_drive not in the sim profile" in proc.stderr
+    assert proc.returncode == 2
+    assert "warp_drive not in the sim profile" in proc.stderr
 
 
 def test_a_real_map_without_lanes_gets_people_on_its_floor(shared_data: Any) -> None:
@@ -245,7 +257,8 @@ def test_a_real_map_without_lanes_gets_people_on_its_floor(shared_data: Any) -> 
     path = shared_data("maps/willow-full/willow-full.yaml")
     sc = parse_scenario({"map": str(path), "start": [10.0, 10.0, 0.0], "pedestrians": 5}, "willow")
     world = build_world(load_profile(None, sc.settings_overrides()), sc)
-    assert world.crowd.lanes is None and len(world.crowd.people) == 5
+    assert world.crowd.lanes is None
+    assert len(world.crowd.people) == 5
     for _ in range(500):
         world.step(0.01)
     for p in world.crowd.people:
@@ -293,7 +306,8 @@ async def test_a_failing_physics_step_restarts_the_node_and_keeps_the_world() ->
         ctx, [NodeSpec("sim_world", WorldNode, True)], until=3.0, after_start=break_once
     )
     health = launcher.health["sim_world"]
-    assert health.restarts == 1 and "boom" in health.last_error
+    assert health.restarts == 1
+    assert "boom" in health.last_error
     assert calls["n"] > 100  # the same world kept stepping after the restart
 
 
@@ -309,7 +323,9 @@ async def test_goal_and_heard_events_without_navigation() -> None:
     ctx.bus.subscribe(topics.HEARD, Text, heard.append)
     await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=1.0)
     (goal,) = ctx.resources[SUMMARY_RESOURCE]["goals"]
-    assert goal["goal"] == "the cafe" and goal["status"] == "no navigation node"
+    assert goal["goal"] == "the cafe"
+    assert goal["status"] == "no navigation node"
     assert [t.data for t in heard] == ["hello"]  # the notification, as the voice pipeline's
     (talk,) = ctx.resources[SUMMARY_RESOURCE]["conversations"]
-    assert talk["heard"] == "hello" and talk["status"] == "no brain"
+    assert talk["heard"] == "hello"
+    assert talk["status"] == "no brain"

@@ -16,7 +16,7 @@ from sage_robot.sim.people import PersonState
 from sage_robot.sim.setup import build_world
 from sage_robot.sim.world import Collision, World
 
-from .simgrids import grid_from_art
+from ..support.grids import draw
 
 DT = 0.01
 TRACK_M = 0.381
@@ -35,7 +35,7 @@ HALL = """
 
 
 def hall_world(**kw) -> World:  # type: ignore[no-untyped-def]
-    grid = grid_from_art(HALL, resolution=0.5)
+    grid = draw(HALL, 0.5)
     kw.setdefault("lidar", LidarSpec(noise_fraction=0.0, noise_floor_m=0.0, dropout_probability=0.0))
     return World(grid, kw.pop("start", (2.0, 2.0, 0.0)), **kw)
 
@@ -61,7 +61,8 @@ def test_a_wall_stops_the_body_and_counts_one_collision() -> None:
     w.on_collision.append(seen.append)
     drive_for(w, 20.0, 0.5, 0.5)  # the east wall's face is at x = 9.5
     assert w.x == pytest.approx(9.5 - 0.25, abs=0.05)
-    assert w.collisions == 1 and seen[0].kind == "wall"
+    assert w.collisions == 1
+    assert seen[0].kind == "wall"
     v, _ = w.drive(DT, 0.5, 0.5, TRACK_M)
     assert v == 0.0  # still pushing: blocked, not a new collision
     assert w.collisions == 1
@@ -103,9 +104,12 @@ def test_a_person_in_front_shows_up_in_the_scan_and_stops_the_body() -> None:
 def test_scan_message_matches_the_a1m8() -> None:
     w = hall_world(lidar=LidarSpec())
     scan = w.scan(1.5)
-    assert scan.frame_id == "laser" and len(scan.ranges) == 360
+    assert scan.frame_id == "laser"
+    assert len(scan.ranges) == 360
     assert scan.ranges.dtype == np.float32
-    assert scan.range_min == 0.15 and scan.range_max == 12.0 and scan.scan_time == pytest.approx(0.1)
+    assert scan.range_min == 0.15
+    assert scan.range_max == 12.0
+    assert scan.scan_time == pytest.approx(0.1)
     finite = np.isfinite(scan.ranges)
     assert finite.mean() > 0.95  # a few dropouts at most (1 % of the beams on average)
     assert ((scan.ranges[finite] >= 0.15) & (scan.ranges[finite] <= 12.0)).all()
@@ -124,7 +128,9 @@ def test_lidar_noise_and_dropouts_are_seeded() -> None:
 def test_speaker_bearing_uses_the_seed_convention() -> None:
     left = hall_world(people=[PersonState(0, 2.0, 3.5, 0.0, "stander")])  # robot at (2, 2) facing east
     sp = left.speaker(0.0)
-    assert sp.present and sp.angle_deg == pytest.approx(90.0) and sp.distance_m == pytest.approx(1.5)
+    assert sp.present
+    assert sp.angle_deg == pytest.approx(90.0)
+    assert sp.distance_m == pytest.approx(1.5)
     front = hall_world(people=[PersonState(0, 4.0, 2.0, 0.0, "stander")]).speaker(0.0)
     assert front.angle_deg == pytest.approx(180.0)
     far = hall_world(people=[PersonState(0, 8.0, 2.0, 0.0, "stander")]).speaker(0.0)
@@ -147,7 +153,8 @@ def test_the_same_seed_gives_the_same_run() -> None:
     a, scan_a = run_world(11, 6.0)
     b, scan_b = run_world(11, 6.0)
     c, _ = run_world(12, 6.0)
-    assert a == b and np.array_equal(scan_a, scan_b)
+    assert a == b
+    assert np.array_equal(scan_a, scan_b)
     assert a != c
 
 
@@ -155,7 +162,10 @@ def test_people_walk_and_the_approacher_comes_to_the_robot() -> None:
     settings = load_profile(None, {"sim": {"seed": 3, "pedestrians": 6}})
     w = build_world(settings)
     kinds = [p.behaviour for p in w.crowd.people]
-    assert kinds.count("walker") >= 1 and "stander" in kinds and "approacher" in kinds and "group" in kinds
+    assert kinds.count("walker") >= 1
+    assert "stander" in kinds
+    assert "approacher" in kinds
+    assert "group" in kinds
     approacher = next(p for p in w.crowd.people if p.behaviour == "approacher")
     walker = next(p for p in w.crowd.people if p.behaviour == "walker")
     start = (walker.x, walker.y)
@@ -166,16 +176,19 @@ def test_people_walk_and_the_approacher_comes_to_the_robot() -> None:
     assert math.hypot(walker.x - start[0], walker.y - start[1]) > 3.0
     assert math.hypot(approacher.x - w.x, approacher.y - w.y) < 1.5
     sp = w.speaker(w.t)
-    assert sp.present and sp.person_id == approacher.id
+    assert sp.present
+    assert sp.person_id == approacher.id
     assert sp.angle_deg == pytest.approx(180.0, abs=40.0)  # in front of the robot
 
 
 def test_camera_gives_a_480x270_jpeg_that_changes_when_turning() -> None:
     w = build_world(load_profile(None, {"sim": {"pedestrians": 0}}))
     a = w.camera_msg(0.0)
-    assert a.format == "jpeg" and a.data[:2] == b"\xff\xd8"
+    assert a.format == "jpeg"
+    assert a.data[:2] == b"\xff\xd8"
     img = Image.open(io.BytesIO(a.data))
-    assert img.size == (480, 270) and img.mode == "RGB"
+    assert img.size == (480, 270)
+    assert img.mode == "RGB"
     drive_for(w, 1.0, -0.2, 0.2)  # turn left ~60°
     b = Image.open(io.BytesIO(w.camera_msg(1.0).data))
     diff = np.abs(np.asarray(img, dtype=np.int16) - np.asarray(b, dtype=np.int16)).mean()
@@ -191,7 +204,8 @@ def test_the_approacher_does_not_chase_a_moving_robot() -> None:
     comer = PersonState(0, 6.0, 2.0, math.pi, "approacher", speed_mps=1.0, start_s=0.0, stay_s=30.0)
     w = hall_world(people=[comer], start=(1.0, 3.0, 0.0))
     drive_for(w, 1.0, 0.4, 0.4)  # the robot is moving: the visitor waits
-    assert (comer.x, comer.y) == (6.0, 2.0) and comer.behaviour == "approacher"
+    assert (comer.x, comer.y) == (6.0, 2.0)
+    assert comer.behaviour == "approacher"
     drive_for(w, 4.0, 0.0, 0.0)  # stopped: they come and stand in front
     assert math.hypot(comer.x - (w.x + 1.0), comer.y - w.y) < 0.3
     assert comer.stay_until > w.t

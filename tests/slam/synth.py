@@ -7,15 +7,20 @@ Map frame: metres, x right, y up; the loop's corridor centre line is a square of
 
 from __future__ import annotations
 
+import asyncio
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from sage_robot.core import topics
 from sage_robot.core.geometry import compose, relative
-from sage_robot.core.msgs import OccupancyGrid, Pose2D
+from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D, Twist
 from sage_robot.nav.slam.points import Scan
 from sage_robot.sim.raycast import GridRaycaster
+
+from ..support.grids import FREE, WALL, blank, fill
 
 RES_M = 0.05
 SIDE_M = 12.0  # corridor centre line: a square of this side
@@ -30,12 +35,10 @@ def corridor_loop(seed: int = 3) -> OccupancyGrid:
     """Walls everywhere, a square corridor carved out, niches and pillars for features."""
     rng = np.random.default_rng(seed)
     size = int((SIDE_M + 2 * MARGIN_M) / RES_M)
-    data = np.full((size, size), 100, dtype=np.int8)
+    grid = blank(size, size, RES_M, (-MARGIN_M, -MARGIN_M), value=WALL)
 
-    def carve(x0: float, y0: float, x1: float, y1: float, value: int = 0) -> None:
-        c0, c1 = sorted((int((x0 + MARGIN_M) / RES_M), int((x1 + MARGIN_M) / RES_M)))
-        r0, r1 = sorted((int((y0 + MARGIN_M) / RES_M), int((y1 + MARGIN_M) / RES_M)))
-        data[r0:r1, c0:c1] = value
+    def carve(x0: float, y0: float, x1: float, y1: float, value: int = FREE) -> None:
+        fill(grid, x0, y0, x1, y1, value)
 
     h = HALF_WIDTH_M
     carve(-h, -h, SIDE_M + h, h)
@@ -50,8 +53,8 @@ def corridor_loop(seed: int = 3) -> OccupancyGrid:
         carve(t, SIDE_M + h, t + 0.7, SIDE_M + h + d * 0.8)
         carve(-h - d, t, -h, t + 0.6)
     for x, y in ((5.0, 0.4), (SIDE_M - 0.5, 8.0), (9.0, SIDE_M + 0.5), (-0.4, 6.0)):
-        carve(x, y, x + 0.2, y + 0.2, 100)
-    return OccupancyGrid(0.0, "map", RES_M, Pose2D(-MARGIN_M, -MARGIN_M, 0.0), data)
+        carve(x, y, x + 0.2, y + 0.2, WALL)
+    return grid
 
 
 def loop_path(step_m: float = 0.2, laps: float = 1.15) -> list[tuple[float, float, float]]:
@@ -104,3 +107,15 @@ def simulate(
         ranges = ranges + rng.normal(0, RANGE_NOISE_M, BEAMS)
         scans.append(Scan(ranges.astype(np.float32), angles, 0.1, RANGE_MAX_M))
     return Drive(truth, odom, scans)
+
+
+async def publish_step(bus: Any, clock: Any, drive: Drive, k: int, dt: float = 0.2) -> None:
+    """Step the clock ``dt``, then publish odometry ``k`` and scan ``k`` of ``drive`` on the bus,
+    as the robot's bridge and lidar do."""
+    await clock.step(dt)
+    x, y, th = drive.odom[k]
+    bus.publish(topics.ODOM, Odometry(clock.now(), Pose2D(x, y, th), Twist()))
+    await asyncio.sleep(0)
+    scan = drive.scans[k]
+    first, step = float(scan.angles[0]), float(scan.angles[1] - scan.angles[0])
+    bus.publish(topics.SCAN, LaserScan(clock.now(), "laser", first, step, 0.1, 12.0, scan.ranges))

@@ -41,16 +41,20 @@ def test_flaser_odom_and_params(tmp_path: Path) -> None:
         "SYNC 1 2 3",
     )
     log = read_log(path)
-    assert len(log.scans) == 1 and len(log.odoms) == 1
+    assert len(log.scans) == 1
+    assert len(log.odoms) == 1
     scan = log.scans[0]
     assert scan.stamp == pytest.approx(1134864629.895182)
     np.testing.assert_allclose(scan.ranges, [1, 2, 3, 4, 81.91], rtol=1e-6)
     assert scan.odom == (0.6, 0.3, 0.2)  # the robot's odometry, not the laser pose
-    assert scan.range_max == 50.0 and scan.laser_offset == (0.1, 0.0, 0.0)
+    assert scan.range_max == 50.0
+    assert scan.laser_offset == (0.1, 0.0, 0.0)
     # 5 beams over 180°: -90°, -45°, 0°, 45°, 90° (odd counts include both ends)
     np.testing.assert_allclose(scan.angles, np.radians([-90, -45, 0, 45, 90]))
     odom = log.odoms[0]
-    assert odom.pose == (1.5, -2.0, 0.3) and odom.tv == 0.4 and odom.stamp == pytest.approx(1134864630.000001)
+    assert odom.pose == (1.5, -2.0, 0.3)
+    assert odom.tv == 0.4
+    assert odom.stamp == pytest.approx(1134864630.000001)
     assert scan.line == 4
 
 
@@ -58,8 +62,10 @@ def test_robotlaser1(tmp_path: Path) -> None:
     log = read_log(write(tmp_path, ROBOTLASER))
     scan = log.scans[0]
     np.testing.assert_allclose(scan.ranges, [1, 2, 3])
-    assert scan.angle_min == pytest.approx(-1.5708) and scan.angle_increment == pytest.approx(0.0174533)
-    assert scan.range_max == 30.0 and scan.stamp == pytest.approx(1134864631.5)
+    assert scan.angle_min == pytest.approx(-1.5708)
+    assert scan.angle_increment == pytest.approx(0.0174533)
+    assert scan.range_max == 30.0
+    assert scan.stamp == pytest.approx(1134864631.5)
     assert scan.odom == (1.0, 2.0, 0.5)
     # laser 0.1 m along x of the map, robot heading 0.5 rad: offset in the robot frame
     assert scan.laser_offset[0] == pytest.approx(0.1 * math.cos(0.5))

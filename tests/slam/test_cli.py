@@ -18,8 +18,10 @@ def test_replay_writes_map_and_trajectory(
     rc = main(["slam", "replay", str(log), "--limit", "30", "--out", str(tmp_path), "--json"])
     assert rc == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["scans"] == 30 and Path(summary["yaml"]).name == "mit-csail.yaml"
-    assert Path(summary["pgm"]).exists() and Path(summary["graph"]).exists()
+    assert summary["scans"] == 30
+    assert Path(summary["yaml"]).name == "mit-csail.yaml"
+    assert Path(summary["pgm"]).exists()
+    assert Path(summary["graph"]).exists()
     assert len(Path(summary["trajectory"]).read_text().splitlines()) == 31  # header + 30 scans
 
 
@@ -28,7 +30,8 @@ def test_malformed_log_is_one_clear_line(tmp_path: Path, capsys: pytest.CaptureF
     bad.write_text("FLASER 3 1.0 2.0\n")
     assert main(["slam", "replay", str(bad), "--json"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"sage: error: {bad}:1: FLASER: expected 3 ranges") and "\n" not in err
+    assert err.startswith(f"sage: error: {bad}:1: FLASER: expected 3 ranges")
+    assert "\n" not in err
 
 
 def test_bench_needs_a_reference(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -69,7 +72,8 @@ def test_sage_slam_runs_and_saves(tmp_path: Path, capsys: pytest.CaptureFixture[
     rc = main(["--profile", str(profile), "slam", "--duration", "5", "--out", str(out), "--name", "five"])
     text = capsys.readouterr().out
     assert rc == 0, text
-    assert "web" in text.splitlines()[0] and "slam" in text.splitlines()[0]
+    assert "web" in text.splitlines()[0]
+    assert "slam" in text.splitlines()[0]
     from sage_robot.core.mapio import read_map
 
     grid = read_map(out / "five.yaml")
@@ -84,4 +88,5 @@ def test_bad_slam_setting_is_a_profile_error(tmp_path: Path, capsys: pytest.Capt
     profile.write_text("slam: {keyframe_dist_m: -1}\n")
     assert main(["--profile", str(profile), "slam", "--duration", "5", "--headless"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "slam.keyframe_dist_m" in err and "\n" not in err
+    assert "slam.keyframe_dist_m" in err
+    assert "\n" not in err

@@ -13,19 +13,17 @@ from typing import Any
 import pytest
 
 from sage_robot.cli.main import main
-from sage_robot.core import topics
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.config import load_profile
 from sage_robot.core.mapio import read_map
-from sage_robot.core.msgs import LaserScan, Odometry, Pose2D, Twist
 from sage_robot.core.node import Node, NodeContext
 from sage_robot.nav.slam.messages import SlamProgress
 from sage_robot.nav.slam.node import OUT_DIR_RESOURCE, SLAM_PROGRESS, SLAM_SAVE, SlamNode
 from sage_robot.web.auth import PASSWORD_ENV
 from sage_robot.web.node import WebNode
 
-from .synth import corridor_loop, loop_path, simulate
+from .synth import corridor_loop, loop_path, publish_step, simulate
 
 WAIT_S = 20.0  # bound on every wait (a loaded 2-core machine)
 SCANS = 12
@@ -67,21 +65,13 @@ async def test_save_a_running_session_over_http(
     try:
         # Before any scan: running, nothing mapped yet; the operator's login is required.
         status, body = await asyncio.to_thread(_get, url + "/api/slam/progress")
-        assert status == 401 and "log in" in body["error"]
+        assert status == 401
+        assert "log in" in body["error"]
 
         progress = bus.subscribe(SLAM_PROGRESS, SlamProgress, maxsize=100)
         drive = simulate(corridor_loop(), loop_path(step_m=0.3)[:SCANS], yaw_drift=0.0)
         for k in range(SCANS):
-            await clock.step(0.2)
-            x, y, th = drive.odom[k]
-            bus.publish(topics.ODOM, Odometry(clock.now(), Pose2D(x, y, th), Twist()))
-            await asyncio.sleep(0)
-            scan = drive.scans[k]
-            step = float(scan.angles[1] - scan.angles[0])
-            bus.publish(
-                topics.SCAN,
-                LaserScan(clock.now(), "laser", float(scan.angles[0]), step, 0.1, 12.0, scan.ranges),
-            )
+            await publish_step(bus, clock, drive, k)
             await asyncio.wait_for(progress.get(), WAIT_S)
 
         assert await _cli(["slam", "save", "live", "--url", url]) == 0
@@ -102,7 +92,9 @@ async def test_save_a_running_session_over_http(
         await asyncio.to_thread(opener.open, login, None, WAIT_S)
         with await asyncio.to_thread(opener.open, url + "/api/slam/progress", None, WAIT_S) as resp:
             seen = json.load(resp)
-        assert seen["running"] is True and seen["scans"] == SCANS and seen["keyframes"] >= SCANS // 2
+        assert seen["running"] is True
+        assert seen["scans"] == SCANS
+        assert seen["keyframes"] >= SCANS // 2
 
         # Refusals are one line each, and nothing is written.
         assert await _cli(["slam", "save", "../up", "--url", url]) == 2
@@ -112,7 +104,8 @@ async def test_save_a_running_session_over_http(
         monkeypatch.setenv(PASSWORD_ENV, "wrong")
         assert await _cli(["slam", "save", "y", "--url", url]) == 2
         err = capsys.readouterr().err.strip().splitlines()[-1]  # the server logs here too
-        assert err.startswith("sage: error: ") and err.endswith("/api/login: 401 wrong password")
+        assert err.startswith("sage: error: ")
+        assert err.endswith("/api/login: 401 wrong password")
         monkeypatch.setenv(PASSWORD_ENV, PASSWORD)
         bus.unserve(SLAM_SAVE)  # as if no slam node ran (e.g. tour mode)
         assert await _cli(["slam", "save", "z", "--url", url]) == 2

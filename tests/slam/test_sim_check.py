@@ -12,4 +12,5 @@ def test_map_of_the_default_building_matches_the_truth() -> None:
     assert result["trajectory_error_max_m"] < 0.1
     assert result["occupied_precision"] > 0.95  # SLAM walls lie on true walls
     assert result["occupied_recall"] > 0.3  # grazing far walls stay unknown at 12 m
-    assert result["nav_planned"] is True and result["nav_path_clear"] is True
+    assert result["nav_planned"] is True
+    assert result["nav_path_clear"] is True

@@ -38,10 +38,12 @@ def test_save_load_round_trip_and_resume(tmp_path: Path) -> None:
     paths = save_session(slam, tmp_path / "out", "floor1")
     assert set(paths) == {"yaml", "pgm", "graph", "trajectory"}
     meta = yaml.safe_load(Path(paths["yaml"]).read_text())
-    assert meta["free_thresh"] == 0.1 and meta["image"] == "floor1.pgm"
+    assert meta["free_thresh"] == 0.1
+    assert meta["image"] == "floor1.pgm"
     grid = read_map(paths["yaml"])
     built = build_map(slam)
-    assert grid.data.shape == built.data.shape and grid.resolution == built.resolution
+    assert grid.data.shape == built.data.shape
+    assert grid.resolution == built.resolution
     assert np.array_equal(grid.data == 100, built.data >= 65)
     assert np.array_equal(grid.data == 0, (built.data >= 0) & (built.data <= 25))
     traj = np.loadtxt(paths["trajectory"])
@@ -54,7 +56,8 @@ def test_save_load_round_trip_and_resume(tmp_path: Path) -> None:
         np.testing.assert_allclose(a.information, b.information)
     for a, b in zip(back.keyframes, slam.keyframes, strict=True):
         np.testing.assert_array_equal(a.scan.ranges, b.scan.ranges)
-        assert a.odom == b.odom and a.stamp == b.stamp
+        assert a.odom == b.odom
+        assert a.stamp == b.stamp
     assert back.config == slam.config
     # Resume: the robot is where the session ended; a new scan there matches the old map.
     result = back.add_scan(99.0, (5.0, 5.0, 1.0), scans[-1])
@@ -103,7 +106,8 @@ def test_short_csail_replay_walls_match(shared_data: Callable[[str], Path]) -> N
         wall_agreement(slam.keyframe_poses(), slam.keyframes),
         wall_agreement(odom, slam.keyframes),
     )
-    assert slam_fit > 0.75 and slam_fit > odom_fit + 0.1
+    assert slam_fit > 0.75
+    assert slam_fit > odom_fit + 0.1
     stamps, poses = slam.trajectory_array()
     rels = [
         r for r in read_relations(shared_data(CSAIL_RELATIONS)) if r.t2 <= stamps[-1] and r.t1 <= stamps[-1]

@@ -14,8 +14,9 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 pytest.importorskip("faster_whisper", reason="voice tests need: pip install 'sage-robot[voice]'")
 pytest.importorskip("piper", reason="voice tests need: pip install 'sage-robot[voice-gpl]'")
 
+from sage_robot.core.audio import SAMPLE_RATE_HZ
 from sage_robot.core.config.areas import VoiceSettings
-from sage_robot.voice.audio_io import SAMPLE_RATE, resample
+from sage_robot.voice.audio_io import resample
 
 POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")
 
@@ -41,18 +42,18 @@ def say16k(models):
     def render(text: str) -> np.ndarray:
         speech = models.speech
         pcm = speech.synthesize(text)
-        return resample(pcm, speech.sample_rate, SAMPLE_RATE)
+        return resample(pcm, speech.sample_rate, SAMPLE_RATE_HZ)
 
     return render
 
 
 def silence(seconds: float) -> np.ndarray:
-    return np.zeros(round(seconds * SAMPLE_RATE), dtype=np.int16)
+    return np.zeros(round(seconds * SAMPLE_RATE_HZ), dtype=np.int16)
 
 
 def noise(seconds: float, rms: float = 30.0, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
-    return np.clip(rng.normal(0, rms, round(seconds * SAMPLE_RATE)), -32768, 32767).astype(np.int16)
+    return np.clip(rng.normal(0, rms, round(seconds * SAMPLE_RATE_HZ)), -32768, 32767).astype(np.int16)
 
 
 def neutral_and_noise(say16k) -> np.ndarray:
@@ -66,7 +67,7 @@ def neutral_and_noise(say16k) -> np.ndarray:
 def chunked_runs(engine, settings, audio: np.ndarray, key: str) -> list[tuple[list, float]]:
     """The profile detector over ``audio`` fed in 80 ms, 333- and 4096-sample chunks:
     per run, its detections (model, time, score) and the best smoothed score of ``key``."""
-    from sage_robot.voice.audio_io import FRAME_SAMPLES
+    from sage_robot.core.audio import FRAME_SAMPLES
     from sage_robot.voice.wake import WakeDetector
 
     results = []

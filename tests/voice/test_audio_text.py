@@ -36,7 +36,8 @@ def peak_hz(x: np.ndarray, rate: int) -> float:
 def test_resample_keeps_pitch_length_and_removes_aliases():
     x = tone(440, 22050)
     y = resample(x, 22050, 16000)
-    assert y.dtype == np.int16 and abs(len(y) - 16000) <= 1
+    assert y.dtype == np.int16
+    assert abs(len(y) - 16000) <= 1
     assert peak_hz(y, 16000) == pytest.approx(440, abs=2)
     # 9 kHz cannot exist at 16 kHz: a proper resampler filters it, it does not fold to 7 kHz.
     z = resample(tone(9000, 48000), 48000, 16000)
@@ -60,7 +61,8 @@ def test_browser_upload_webm_opus_decodes_to_16k(tmp_path):
     subprocess.run(["ffmpeg", "-loglevel", "error", "-i", str(wav), "-c:a", "libopus", str(webm)],
                    check=True, timeout=60)  # fmt: skip
     pcm = decode_upload(webm.read_bytes())
-    assert pcm.dtype == np.int16 and len(pcm) / 16000 == pytest.approx(2.0, abs=0.05)
+    assert pcm.dtype == np.int16
+    assert len(pcm) / 16000 == pytest.approx(2.0, abs=0.05)
     assert peak_hz(pcm, 16000) == pytest.approx(440, abs=3)
     with pytest.raises(AudioError, match="not audio ffmpeg can decode"):
         decode_upload(b"this is not audio at all")
@@ -111,16 +113,19 @@ def test_split_sentences_for_streaming():
     assert split_sentences("Hello there. How are you? Fine!") == ["Hello there.", "How are you?", "Fine!"]
     long = "word, " * 80 + "end."
     parts = split_sentences(long)
-    assert len(parts) > 1 and all(len(p) <= 301 for p in parts)
+    assert len(parts) > 1
+    assert all(len(p) <= 301 for p in parts)
 
 
 def test_piper_is_deterministic_and_streams_sentence_by_sentence(models):
     speech = models.speech
     a = speech.synthesize("The lab is on the first floor. Follow me.")
     b = speech.synthesize("The lab is on the first floor. Follow me.")
-    assert np.array_equal(a, b) and len(a) / speech.sample_rate > 1.5
+    assert np.array_equal(a, b)
+    assert len(a) / speech.sample_rate > 1.5
     parts = list(speech.stream("The lab is on the first floor. Follow me."))
-    assert len(parts) == 2 and sum(len(p) for p in parts) == len(a)
+    assert len(parts) == 2
+    assert sum(len(p) for p in parts) == len(a)
 
 
 def test_mouth_envelope_follows_loudness(models):
@@ -128,7 +133,8 @@ def test_mouth_envelope_follows_loudness(models):
     pcm = np.concatenate([np.zeros(speech.sample_rate, np.int16), speech.synthesize("Hello.")])
     env = mouth_envelope(pcm, speech.sample_rate)
     blocks_per_s = round(1 / 0.04)
-    assert env[:blocks_per_s].max() == 0.0 and env[blocks_per_s:].max() > 0.5
+    assert env[:blocks_per_s].max() == 0.0
+    assert env[blocks_per_s:].max() > 0.5
     assert ((env >= 0) & (env <= 1)).all()
 
 
@@ -136,9 +142,11 @@ def test_mouth_envelope_follows_loudness(models):
 def test_espeak_engine_is_a_drop_in_tts(models):
     speech = Speech(EspeakEngine())
     pcm = speech.synthesize("Go forward 10 meters.")
-    assert speech.sample_rate == 22050 and len(pcm) > 0.8 * 22050
+    assert speech.sample_rate == 22050
+    assert len(pcm) > 0.8 * 22050
     text = models.stt.transcribe(resample(pcm, speech.sample_rate, 16000)).text.lower()
-    assert "forward" in text and ("ten" in text or "10" in text)
+    assert "forward" in text
+    assert "ten" in text or "10" in text
 
 
 def test_engine_choice_errors_and_web_helper(models, monkeypatch):
@@ -150,4 +158,6 @@ def test_engine_choice_errors_and_web_helper(models, monkeypatch):
     with pytest.raises(ConfigError, match=r"Piper voice '/nope\.onnx'"):
         make_engine("piper", "/nope.onnx")
     pcm, rate = synthesize("Hello.")
-    assert pcm.dtype == np.int16 and rate > 0 and len(pcm) > 0.2 * rate
+    assert pcm.dtype == np.int16
+    assert rate > 0
+    assert len(pcm) > 0.2 * rate

@@ -14,10 +14,13 @@ from sage_robot.core.config import Settings
 from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.voice import AudioChunk, Phase, UiState
 from sage_robot.core.node import NodeContext
+from sage_robot.core.resources import Resources
 from sage_robot.core.topics import HEARD, SIM_VISITOR_AUDIO, SIM_VISITOR_SAY, UI_STATE
 from sage_robot.voice import node as voice_node
 from sage_robot.voice.audio_io import load_audio
 from sage_robot.voice.node import SIM_AUDIO_KEY, SIM_OUT_DIR_KEY, VoiceNode
+
+from ..support.waits import until
 
 WAIT_S = 90.0
 
@@ -25,17 +28,20 @@ WAIT_S = 90.0
 def test_transcribe_json(pocketsphinx_data, capsys):
     assert main(["voice", "transcribe", str(pocketsphinx_data / "goforward.raw"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["text"].lower().startswith("go forward") and out["segments"]
+    assert out["text"].lower().startswith("go forward")
+    assert out["segments"]
 
 
 def test_say_to_wav_then_wake_json(tmp_path, capsys):
     wav = tmp_path / "hey.wav"
     assert main(["voice", "say", "Hey Jarvis. The lab is 2 km away.", "--out", str(wav)]) == 0
-    assert "wrote" in capsys.readouterr().out and len(load_audio(wav)) > 16000
+    assert "wrote" in capsys.readouterr().out
+    assert len(load_audio(wav)) > 16000
     assert main(["voice", "wake", str(wav), "--model", "hey_jarvis", "--model", "alexa", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert [d["model"] for d in out["detections"]] == ["hey_jarvis"]
-    assert out["detections"][0]["time_s"] < 2.0 and out["max_scores"]["alexa"] < 0.1
+    assert out["detections"][0]["time_s"] < 2.0
+    assert out["max_scores"]["alexa"] < 0.1
 
 
 @pytest.mark.parametrize(
@@ -49,7 +55,9 @@ def test_say_to_wav_then_wake_json(tmp_path, capsys):
 def test_bad_input_is_one_clear_line(argv, message, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert message in err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
 
 
 async def test_voice_node_in_simulation(models, monkeypatch, tmp_path, pocketsphinx_data):
@@ -59,7 +67,7 @@ async def test_voice_node_in_simulation(models, monkeypatch, tmp_path, pocketsph
     monkeypatch.setattr(voice_node.VoiceModels, "load", classmethod(lambda cls, s: models))
     clock = SimClock()
     bus = Bus(clock)
-    ctx = NodeContext(bus, clock, Settings(), {SIM_OUT_DIR_KEY: tmp_path})
+    ctx = NodeContext(bus, clock, Settings(), Resources({SIM_OUT_DIR_KEY: tmp_path}))
     heard: list[str] = []
     ui: list[UiState] = []
     bus.subscribe(HEARD, Text, lambda m: heard.append(m.data))
@@ -75,24 +83,21 @@ async def test_voice_node_in_simulation(models, monkeypatch, tmp_path, pocketsph
     stop = asyncio.Event()
     runner = asyncio.create_task(clock.run(0.02, speed=None, stop=stop, on_step=lockstep))
     try:
-        async def wait(cond) -> None:
-            while not cond():
-                await asyncio.sleep(0.02)
-
-        await asyncio.wait_for(wait(lambda: node.pipeline is not None), WAIT_S)
-        await asyncio.wait_for(wait(lambda: bus.topics().get(SIM_VISITOR_SAY) is not None), WAIT_S)
+        await until(lambda: node.pipeline is not None, timeout=WAIT_S)
+        await until(lambda: bus.topics().get(SIM_VISITOR_SAY) is not None, timeout=WAIT_S)
         bus.publish(SIM_VISITOR_SAY, Text("Hey Jarvis."))
-        await asyncio.wait_for(wait(lambda: node.pipeline.detections), WAIT_S)
+        await until(lambda: node.pipeline.detections, timeout=WAIT_S)
         go = load_audio(pocketsphinx_data / "goforward.raw")  # a real recording, as a WAV would be
         bus.publish(SIM_VISITOR_AUDIO, AudioChunk(clock.now(), 16000, go.astype("<i2").tobytes()))
-        await asyncio.wait_for(wait(lambda: list(tmp_path.glob("*.wav"))), WAIT_S)
+        await until(lambda: list(tmp_path.glob("*.wav")), timeout=WAIT_S)
     finally:
         stop.set()
         runner.cancel()
         await asyncio.gather(runner, return_exceptions=True)
         await node._close()
         await node.teardown()
-    assert heard and heard[0].lower().startswith("go forward")
+    assert heard
+    assert heard[0].lower().startswith("go forward")
     assert any(u.error_msg == "brain not running" for u in ui)
     assert Phase.SPEAKING in {u.phase for u in ui}
     assert node.stats()["turns"] == 1
@@ -108,4 +113,6 @@ def test_listen_without_a_microphone_is_one_clear_line(capsys):
         pytest.skip("this machine has a microphone; the error path needs none")
     assert main(["voice", "listen", "--seconds", "1"]) == 2
     err = capsys.readouterr().err
-    assert "microphone" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "microphone" in err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sage_robot.voice.audio_io import FRAME_SAMPLES, SAMPLE_RATE
+from sage_robot.core.audio import FRAME_SAMPLES, SAMPLE_RATE_HZ
 from sage_robot.voice.denoise import DELAY_SAMPLES, GAIN_FLOOR, HOP, NoiseSuppressor
 from sage_robot.voice.wake import DENOISED_SUFFIX, WakeDetector
 
@@ -46,15 +46,15 @@ def test_suppressor_lowers_stationary_noise_and_keeps_a_tone():
     """After 1.5 s of white noise the noise is down to about the gain floor; a loud 440 Hz
     tone that starts then comes through at nearly its level (16 ms later)."""
     rng = np.random.default_rng(0)
-    n = 4 * SAMPLE_RATE
+    n = 4 * SAMPLE_RATE_HZ
     white = rng.normal(0, 500, n)
-    t = np.arange(n) / SAMPLE_RATE
+    t = np.arange(n) / SAMPLE_RATE_HZ
     tone = np.where(t >= 2.5, 8000 * np.sin(2 * np.pi * 440 * t), 0.0)
     ns = NoiseSuppressor()
     out = ns.process(np.clip(white + tone, -32768, 32767).astype(np.int16)).astype(np.float64)
-    quiet = slice(int(1.6 * SAMPLE_RATE), int(2.4 * SAMPLE_RATE))
+    quiet = slice(int(1.6 * SAMPLE_RATE_HZ), int(2.4 * SAMPLE_RATE_HZ))
     assert _rms(out[quiet]) < 2 * GAIN_FLOOR * _rms(white[quiet])
-    loud = slice(int(3.0 * SAMPLE_RATE), int(3.9 * SAMPLE_RATE))
+    loud = slice(int(3.0 * SAMPLE_RATE_HZ), int(3.9 * SAMPLE_RATE_HZ))
     shifted = tone[loud.start - DELAY_SAMPLES : loud.stop - DELAY_SAMPLES]
     assert _rms(out[loud] - shifted) < 0.15 * _rms(shifted)
 
@@ -69,17 +69,20 @@ def test_suppressor_rejects_bad_settings():
 def test_profile_turns_the_denoised_path_on(models, denoising):
     models.wake.reset()
     det = WakeDetector.from_settings(models.wake, denoising)
-    assert det.denoised is not None and det.denoised is not models.wake
+    assert det.denoised is not None
+    assert det.denoised is not models.wake
     assert det.denoised_thresholds == {"hey_jarvis": 0.25}  # alexa: no second path
     assert set(det.max_scores) == {"hey_jarvis", "alexa", "hey_jarvis" + DENOISED_SUFFIX}
     off = WakeDetector.from_settings(models.wake, denoising.model_copy(update={"wake_denoise": False}))
-    assert off.denoised is None and set(off.max_scores) == {"hey_jarvis", "alexa"}
+    assert off.denoised is None
+    assert set(off.max_scores) == {"hey_jarvis", "alexa"}
 
 
 def test_denoised_path_detections_do_not_depend_on_chunking(models, denoising, say16k):
     audio = np.concatenate([noise(1.0, 300), say16k("Hey Jarvis."), noise(0.8, 300)])
     results = chunked_runs(models.wake, denoising, audio, "hey_jarvis" + DENOISED_SUFFIX)
-    assert results[0][0] and results[0] == results[1] == results[2]
+    assert results[0][0]
+    assert results[0] == results[1] == results[2]
 
 
 def test_denoised_path_no_wake_on_neutral_and_noise(models, denoising, say16k):
@@ -98,9 +101,9 @@ def test_denoised_path_hears_a_hey_jarvis_the_first_path_misses(models, denoisin
     from sage_robot.voice.tts import EspeakEngine
 
     es = EspeakEngine("en-gb+m1", 150)
-    pcm = resample(es.synthesize_sentence("Hey Jarvis!"), es.sample_rate, SAMPLE_RATE)
+    pcm = resample(es.synthesize_sentence("Hey Jarvis!"), es.sample_rate, SAMPLE_RATE_HZ)
     sig = _rms(pcm)
-    x = np.concatenate([np.zeros(SAMPLE_RATE), pcm.astype(np.float64), np.zeros(SAMPLE_RATE)])
+    x = np.concatenate([np.zeros(SAMPLE_RATE_HZ), pcm.astype(np.float64), np.zeros(SAMPLE_RATE_HZ)])
     x += np.random.default_rng(2).normal(0, sig / 10 ** (5 / 20), len(x))
     audio = np.clip(x, -32768, 32767).astype(np.int16)
     off = denoising.model_copy(update={"wake_denoise": False})

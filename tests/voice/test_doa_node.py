@@ -117,13 +117,16 @@ async def test_sim_doa_follows_the_simulated_speaker():
     assert len(got) == pytest.approx(150 * 0.02 * 12.5, abs=1)  # ~12.5 Hz
     assert {d.source for d in got} == {"sim"}
     angles = [d.angle_deg for d in got]
-    assert angles[0] == 180.0 and 270.0 in angles and angles[-1] == 180.0
+    assert angles[0] == 180.0
+    assert 270.0 in angles
+    assert angles[-1] == 180.0
 
 
 async def test_real_mode_without_device_falls_back_to_front():
     settings = Settings.model_validate({"voice": {"enabled": False, "source": "mic"}})
     got, _ = await run_node(settings, 30)
-    assert got and {(d.angle_deg, d.source) for d in got} == {(180.0, "fixed")}
+    assert got
+    assert {(d.angle_deg, d.source) for d in got} == {(180.0, "fixed")}
 
 
 async def test_sim_mic_skips_only_silence_when_its_reader_falls_behind():
@@ -137,8 +140,10 @@ async def test_sim_mic_skips_only_silence_when_its_reader_falls_behind():
     await asyncio.wait_for(first, 5)
     await clock.step(10.0)  # the reader slept through 10 s of nothing
     await asyncio.wait_for(mic.read(), 5)
-    assert mic.skipped >= 115 and mic.frame_time == pytest.approx(clock.now(), abs=0.2)
+    assert mic.skipped >= 115
+    assert mic.frame_time == pytest.approx(clock.now(), abs=0.2)
     mic.inject(np.full(16000, 1000, dtype=np.int16))  # a visitor speaks: nothing is skipped
     await clock.step(10.0)
     frames = [await asyncio.wait_for(mic.read(), 5) for _ in range(12)]
-    assert min(int(f.mean()) for f in frames) > 900 and mic.skipped < 130
+    assert min(int(f.mean()) for f in frames) > 900
+    assert mic.skipped < 130

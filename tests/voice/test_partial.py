@@ -18,6 +18,7 @@ from sage_robot.sim.audio import SimMicrophone, SimSpeaker
 from sage_robot.voice.node import build_pipeline
 from sage_robot.voice.pipeline import State
 
+from ..support.waits import until
 from .conftest import silence
 
 WAIT_S = 60.0  # bound on the turn (real seconds; the audio itself is ~10 s)
@@ -42,7 +43,8 @@ async def test_partial_transcript_arrives_before_the_final(voice_settings, model
     bus.actions.serve(CONVERSE, echo)
     mic = SimMicrophone(clock)
     pipe = build_pipeline(bus, clock, voice_settings, models, mic, SimSpeaker(clock, mic, echo_gain=0.1))
-    assert pipe.partial_stt is models.stt_partial and pipe.partial_stt is not None
+    assert pipe.partial_stt is models.stt_partial
+    assert pipe.partial_stt is not None
     pipe.partial_stt = PartialTranscriber(nice=0)
     speech = say16k(LONG)
     assert len(speech) / 16000 > 5.0
@@ -50,11 +52,8 @@ async def test_partial_transcript_arrives_before_the_final(voice_settings, model
                                silence(1.0)]))  # fmt: skip
     task = asyncio.create_task(pipe.run())
     try:
-        async def turn_done() -> None:
-            while not (pipe.latencies and pipe.state is State.IDLE and not pipe.mouth.speaking):
-                await asyncio.sleep(0.05)
-
-        await asyncio.wait_for(turn_done(), WAIT_S)
+        await until(lambda: pipe.latencies and pipe.state is State.IDLE and not pipe.mouth.speaking,
+                    "the turn to end", timeout=WAIT_S, poll=0.05)
     finally:
         task.cancel()
         await asyncio.gather(task, return_exceptions=True)
@@ -65,7 +64,8 @@ async def test_partial_transcript_arrives_before_the_final(voice_settings, model
     assert "robot" in " ".join(partials).lower()  # the start of the utterance, transcribed
     assert "friday" in ui[final].asr_final.lower()
     assert len(partials[0]) < len(ui[final].asr_final)  # a partial is the utterance so far
-    assert pipe.partials == len(set(partials)) and pipe.latencies[0].reply_delay_s > 0
+    assert pipe.partials == len(set(partials))
+    assert pipe.latencies[0].reply_delay_s > 0
 
 
 def test_partials_can_be_switched_off(voice_settings, models):
@@ -76,8 +76,8 @@ def test_partials_can_be_switched_off(voice_settings, models):
     pipe = build_pipeline(bus, clock, off, models, mic, SimSpeaker(clock, mic, echo_gain=0.1))
     assert pipe.partial_stt is None
     pipe.recorder.push(np.zeros(1280, np.int16), 1.0)
-    pipe._transcribe_partial()  # no model: nothing starts
-    assert pipe._partial_task is None
+    pipe.live.transcribe_partial(pipe.recorder)  # no model: nothing starts
+    assert pipe.live.partial_task is None
 
 
 @pytest.mark.parametrize("interval_s", [0.0, -1.0])
@@ -97,7 +97,8 @@ def test_partial_process_runs_at_lower_priority(models, pocketsphinx_data):
     from sage_robot.voice.partial import PARTIAL_NICE
 
     part = models.stt_partial
-    assert part is not None and part.pid != os.getpid()
+    assert part is not None
+    assert part.pid != os.getpid()
     mine = os.getpriority(os.PRIO_PROCESS, 0)
     assert os.getpriority(os.PRIO_PROCESS, part.pid) == min(19, mine + PARTIAL_NICE)
     text = part.transcribe(load_audio(pocketsphinx_data / "goforward.raw")).text.lower()

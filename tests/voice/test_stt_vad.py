@@ -8,8 +8,9 @@ import re
 import numpy as np
 import pytest
 
+from sage_robot.core.audio import FRAME_S, FRAME_SAMPLES
 from sage_robot.core.errors import ConfigError
-from sage_robot.voice.audio_io import FRAME_S, FRAME_SAMPLES, Framer, load_audio, resample
+from sage_robot.voice.audio_io import Framer, load_audio, resample
 from sage_robot.voice.stt import SpeechToText, Transcript, transcribe_pcm
 from sage_robot.voice.vad import EndReason, SileroVad, UtteranceRecorder
 from sage_robot.voice.wake import WakeDetector
@@ -40,7 +41,8 @@ def word_errors(ref: str, hyp: str) -> int:
 def test_goforward_recording(models, pocketsphinx_data):
     result = models.stt.transcribe(load_audio(pocketsphinx_data / "goforward.raw"))
     assert words(result.text) == ["go", "forward", "ten", "meters"]
-    assert 0.3 < result.confidence <= 1 and result.no_speech_prob < 0.5
+    assert 0.3 < result.confidence <= 1
+    assert result.no_speech_prob < 0.5
     assert result.duration_s == pytest.approx(2.786, abs=0.01)
 
 
@@ -67,7 +69,8 @@ def test_librivox_recordings_word_error_rate(models, pocketsphinx_data):
 def test_silence_and_noise_give_no_words(models, clip):
     result = models.stt.transcribe(clip)
     assert result == Transcript("", duration_s=len(clip) / 16000, elapsed_s=result.elapsed_s)
-    assert result.empty and result.no_speech_prob == 1.0
+    assert result.empty
+    assert result.no_speech_prob == 1.0
 
 
 @pytest.mark.parametrize("clip", [silence(3.0), noise(3.0, rms=3000, seed=2)], ids=["silence", "noise"])
@@ -105,7 +108,8 @@ def test_utterance_ends_after_silence_and_keeps_the_preroll(models, say16k):
     speech = say16k("Where is the library?")
     audio = np.concatenate([silence(1.0), speech, silence(2.0)])
     _, utt, n = run_recorder(audio, models.vad, silence_s=0.7, preroll_s=0.4, start_timeout_s=5)
-    assert utt is not None and utt.reason is EndReason.SILENCE
+    assert utt is not None
+    assert utt.reason is EndReason.SILENCE
     end_of_speech_s = (16000 + len(speech)) / 16000
     assert end_of_speech_s + 0.5 <= (n + 1) * FRAME_S <= end_of_speech_s + 1.0
     # The first syllable is inside: the utterance starts before the speech does.
@@ -119,9 +123,11 @@ def test_utterance_ends_after_silence_and_keeps_the_preroll(models, say16k):
 def test_max_length_and_no_speech(models, say16k):
     long = np.concatenate([say16k("Please follow me and mind the step.")] * 3)
     _, utt, _ = run_recorder(np.concatenate([silence(0.3), long]), models.vad, max_s=2.0)
-    assert utt.reason is EndReason.MAX_LENGTH and len(utt.pcm) / 16000 <= 2.0 + FRAME_S
+    assert utt.reason is EndReason.MAX_LENGTH
+    assert len(utt.pcm) / 16000 <= 2.0 + FRAME_S
     _, utt, n = run_recorder(noise(3.0), models.vad, start_timeout_s=1.2)
-    assert utt.reason is EndReason.NO_SPEECH and len(utt.pcm) == 0
+    assert utt.reason is EndReason.NO_SPEECH
+    assert len(utt.pcm) == 0
     assert (n + 1) * FRAME_S == pytest.approx(1.2, abs=FRAME_S)
 
 
@@ -143,7 +149,9 @@ def test_round_trip_piper_resample_wake_vad_stt(models, say16k):
         woke = woke or bool(wake.feed(frame))
         if woke and utt is None:
             utt = rec.push(frame, models.vad.frame_probability(frame))
-    assert woke and utt is not None and utt.reason is EndReason.SILENCE
+    assert woke
+    assert utt is not None
+    assert utt.reason is EndReason.SILENCE
     text = models.stt.transcribe(utt.pcm).text
     assert {"take", "me", "library"} <= set(words(text)), text
     assert "jarvis" not in words(text)

@@ -7,8 +7,9 @@ import shutil
 import numpy as np
 import pytest
 
+from sage_robot.core.audio import FRAME_SAMPLES, SAMPLE_RATE_HZ
 from sage_robot.core.errors import ConfigError
-from sage_robot.voice.audio_io import FRAME_SAMPLES, SAMPLE_RATE, resample
+from sage_robot.voice.audio_io import resample
 from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector, bundled_wake_models
 
 from .conftest import noise, silence
@@ -57,7 +58,8 @@ def test_refractory_merges_one_phrase_but_not_two(models, say16k):
     det = WakeDetector(models.wake, refractory_s=2.0)
     once = det.feed(np.concatenate([silence(0.5), phrase, silence(0.5)]))
     twice = det.feed(np.concatenate([silence(2.5), phrase, silence(1.0)]))
-    assert len(once) == 1 and len(twice) == 1
+    assert len(once) == 1
+    assert len(twice) == 1
     assert twice[0].time_s - once[0].time_s > 2.0
 
 
@@ -81,7 +83,8 @@ def test_chunked_detections_match_exactly(models, say16k):
         for i in range(0, len(audio), chunk):
             found += det.feed(audio[i : i + chunk])
         results.append([(d.model, d.time_s, round(d.score, 6)) for d in found])
-    assert results[0] and results[0] == results[1] == results[2]
+    assert results[0]
+    assert results[0] == results[1] == results[2]
 
 
 def test_no_wake_on_neutral_sentences_and_noise(models, say16k):
@@ -168,7 +171,8 @@ def test_per_model_threshold_and_patience():
                        model_thresholds={"a": 0.4}, model_patience={"a": 1})  # fmt: skip
     found = det.feed(np.zeros(len(scores) * FRAME_SAMPLES, np.int16))
     assert [(d.model, round(d.time_s / 0.08)) for d in found] == [("a", 2), ("b", 4)]
-    assert det.thresholds == {"a": 0.4, "b": 0.6} and det.patiences == {"a": 1, "b": 2}
+    assert det.thresholds == {"a": 0.4, "b": 0.6}
+    assert det.patiences == {"a": 1, "b": 2}
     with pytest.raises(ValueError, match="patience"):
         WakeDetector(TwoModelEngine([]), model_patience={"b": 0})
     with pytest.raises(ValueError, match="threshold of a"):
@@ -194,7 +198,8 @@ def test_profile_alexa_wakes_on_alexa_not_on_alex(models, voice_settings, say16k
     the bench's confusable "Alex sat on the bench outside" does not."""
     models.wake.reset()
     det = WakeDetector.from_settings(models.wake, voice_settings)
-    assert det.smoothings["alexa"] > 1 and det.patiences["alexa"] > 1
+    assert det.smoothings["alexa"] > 1
+    assert det.patiences["alexa"] > 1
     found = det.feed(np.concatenate([silence(0.5), say16k("Alexa, where is the cafe?"), silence(1)]))
     assert [d.model for d in found] == ["alexa"]
     models.wake.reset()
@@ -215,7 +220,7 @@ def test_profile_detector_no_wake_on_neutral_and_noise(models, voice_settings, s
     assert det.thresholds["hey_jarvis"] < voice_settings.wake_threshold
     assert det.feed(audio) == []
     es = EspeakEngine("en-gb", 140)
-    pcm = resample(es.synthesize_sentence("Hey Jarvis."), es.sample_rate, SAMPLE_RATE)
+    pcm = resample(es.synthesize_sentence("Hey Jarvis."), es.sample_rate, SAMPLE_RATE_HZ)
     models.wake.reset()
     det = WakeDetector.from_settings(models.wake, voice_settings)
     noisy = add_noise(pcm, 10.0, np.random.default_rng(1))

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sage_robot.core.audio import SAMPLE_RATE_HZ
 from sage_robot.core.config.areas import VoiceSettings
 from sage_robot.core.errors import ConfigError
-from sage_robot.voice.audio_io import SAMPLE_RATE
 from sage_robot.voice.wake import HEAD_SUFFIX, WakeDetector
 from sage_robot.voice.wake_head import EMBEDDING_SIZE, HEAD_FRAMES, load_head, save_head
 
@@ -22,9 +22,9 @@ def _noisy_espeak(voice: str, wpm: int, snr_db: float, seed: int) -> np.ndarray:
     from sage_robot.voice.tts import EspeakEngine
 
     es = EspeakEngine(voice, wpm)
-    pcm = resample(es.synthesize_sentence("Hey Jarvis."), es.sample_rate, SAMPLE_RATE).astype(np.float64)
+    pcm = resample(es.synthesize_sentence("Hey Jarvis."), es.sample_rate, SAMPLE_RATE_HZ).astype(np.float64)
     sig = float(np.sqrt(np.mean(pcm**2)))
-    x = np.concatenate([np.zeros(SAMPLE_RATE), pcm, np.zeros(SAMPLE_RATE)])
+    x = np.concatenate([np.zeros(SAMPLE_RATE_HZ), pcm, np.zeros(SAMPLE_RATE_HZ)])
     x += np.random.default_rng(seed).normal(0, sig / 10 ** (snr_db / 20), len(x))
     return np.clip(x, -32768, 32767).astype(np.int16)
 
@@ -72,7 +72,8 @@ def test_bad_heads_are_clear_errors(tmp_path):
 def test_profile_detector_has_the_head(models, voice_settings):
     models.wake.reset()
     det = WakeDetector.from_settings(models.wake, voice_settings)
-    assert set(det.heads) == {"hey_jarvis"} and det.head_thresholds == {"hey_jarvis": 0.9}
+    assert set(det.heads) == {"hey_jarvis"}
+    assert det.head_thresholds == {"hey_jarvis": 0.9}
     assert "hey_jarvis" + HEAD_SUFFIX in det.max_scores
     bad = voice_settings.model_copy(update={"wake_heads": {"hey_jarvis": "no_such_head"}})
     with pytest.raises(ConfigError, match="unknown wake head"):
@@ -90,7 +91,8 @@ def test_head_hears_a_hey_jarvis_the_model_misses(models, voice_settings):
     models.wake.reset()
     det = WakeDetector.from_settings(models.wake, voice_settings)
     assert [d.model for d in det.feed(audio)] == ["hey_jarvis"]
-    assert det.max_smoothed["hey_jarvis"] < 0.25 and det.max_smoothed["hey_jarvis" + HEAD_SUFFIX] >= 0.9
+    assert det.max_smoothed["hey_jarvis"] < 0.25
+    assert det.max_smoothed["hey_jarvis" + HEAD_SUFFIX] >= 0.9
 
 
 def test_head_is_gated_by_the_models_own_score(models, voice_settings):
@@ -105,7 +107,8 @@ def test_head_is_gated_by_the_models_own_score(models, voice_settings):
 def test_head_detections_do_not_depend_on_chunking(models, voice_settings):
     audio = _noisy_espeak("en-gb", 175, 5.0, seed=3)
     results = chunked_runs(models.wake, voice_settings, audio, "hey_jarvis" + HEAD_SUFFIX)
-    assert results[0][0] and results[0] == results[1] == results[2]
+    assert results[0][0]
+    assert results[0] == results[1] == results[2]
 
 
 def test_head_no_wake_on_neutral_speech_and_noise(models, voice_settings, say16k):

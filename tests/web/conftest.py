@@ -20,7 +20,7 @@ from collections.abc import Callable, Coroutine, Iterator
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+import httpx
 import pytest
 
 from sage_robot.app.launcher import NodeSpec
@@ -37,6 +37,10 @@ from sage_robot.core.msgs.nav import NavigateGoal, NavigateResult
 from sage_robot.core.node import NodeState
 from sage_robot.core.paths import DEFAULT_BUILDING, map_yaml, package_data
 from sage_robot.core.places import Place, Places, write_places
+from sage_robot.web.node import WEB_URL
+
+from ..support.grids import fill, room
+from ..support.waits import until
 
 PASSWORD = "test-operator-pw"
 START_TIMEOUT_S = 20.0
@@ -65,12 +69,8 @@ def artifacts_dir() -> Path:
 
 def hand_drawn_map() -> OccupancyGrid:
     """A 10 m x 6 m room with walls, origin at (-2, -3): the robot starts at (0, 0) facing +x."""
-    rows, cols = int(6 / MAP_RES_M), int(10 / MAP_RES_M)
-    data = np.zeros((rows, cols), dtype=np.int8)
-    data[:2, :] = data[-2:, :] = 100
-    data[:, :2] = data[:, -2:] = 100
-    data[40:60, 140:150] = 100  # a pillar
-    return OccupancyGrid(0.0, "map", MAP_RES_M, Pose2D(-2.0, -3.0, 0.0), data)
+    grid = room(10.0, 6.0, MAP_RES_M, wall_cells=2, origin=(-2.0, -3.0))
+    return fill(grid, 5.0, -1.0, 5.5, 0.0)  # a pillar
 
 
 class SimRobot:
@@ -144,10 +144,9 @@ class SimRobot:
 
         async def after_start(launcher: Any) -> None:
             self.launcher = launcher
-            for _ in range(int(START_TIMEOUT_S / 0.05)):  # stand-ins only for what did not start
-                if all(h.state is NodeState.RUNNING for h in launcher.health.values()):
-                    break
-                await asyncio.sleep(0.05)
+            with contextlib.suppress(AssertionError):  # a node that never runs shows in the tests
+                await until(lambda: all(h.state is NodeState.RUNNING for h in launcher.health.values()),
+                            "every node to run", START_TIMEOUT_S, poll=0.05)
             self.bus.subscribe(topics.ODOM, Odometry, self._on_odom)
             if "map_server" not in self.node_names:
                 self.stand_ins.append("map")
@@ -161,11 +160,8 @@ class SimRobot:
             if self.with_converse and not self.bus.actions.has(topics.CONVERSE):
                 self.stand_ins.append("converse")
                 self.bus.actions.serve(topics.CONVERSE, self._converse)
-            for _ in range(int(START_TIMEOUT_S / 0.05)):
-                if self.ctx.resources.get("web_url"):
-                    break
-                await asyncio.sleep(0.05)
-            self.url = self.ctx.resources["web_url"]
+            self.url = await until(lambda: self.ctx.resources.get(WEB_URL), "the web server's address",
+                                   START_TIMEOUT_S, poll=0.05)
             report = {"nodes": self.node_names, "stand_ins": self.stand_ins, "not_landed": self.missing}
             (self.artifacts / "run.json").write_text(json.dumps(report, indent=1))
             self.ready.set()
@@ -262,3 +258,18 @@ def browser() -> Iterator[Any]:
         finally:
             with contextlib.suppress(Exception):
                 b.close()
+
+
+@pytest.fixture(scope="module")
+def client(robot: SimRobot) -> Iterator[httpx.Client]:
+    """HTTP to the module's robot (not logged in)."""
+    with httpx.Client(base_url=robot.url, timeout=30.0) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def cookie(robot: SimRobot) -> str:
+    """The operator's session cookie, from the login API."""
+    resp = httpx.post(f"{robot.url}/api/login", json={"password": robot.password})
+    assert resp.status_code == 200
+    return f"sage_session={resp.cookies['sage_session']}"

@@ -8,7 +8,6 @@
 
 from __future__ import annotations
 
-import time
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -18,7 +17,9 @@ import pytest
 from sage_robot.core import topics
 from sage_robot.core.msgs import Twist
 
-ANSWER_BOUND_S = 30.0  # each request: wall seconds at most
+from ..support.waits import wait_until
+
+ANSWER_BOUND_S = 30.0  # each request answers within this (the clients' timeout: a hang fails)
 PLACE = "GUELLY_DELLY"
 
 
@@ -44,39 +45,31 @@ def test_a_double_click_then_cancel_answers_and_leaves_the_robot_stopped(
     assert [r.status_code for r in clicks] == [200, 200], [r.text for r in clicks]
     ids = [r.json()["goal_id"] for r in clicks]
     assert ids[0] != ids[1]
-    t0 = time.monotonic()
     assert operator.post("/api/cancel").status_code == 200
-    assert time.monotonic() - t0 < ANSWER_BOUND_S
     assert robot.call(lambda: robot.bus.actions.active(topics.NAVIGATE_TO)) is None, "no goal left running"
-    deadline = time.monotonic() + 5.0
-    while time.monotonic() < deadline and not (cmds and cmds[-1].is_zero):
-        time.sleep(0.01)
-    assert cmds and cmds[-1].is_zero, "the robot was told to stop"
+    wait_until(lambda: cmds and cmds[-1].is_zero, "the robot to be told to stop")
     again = operator.post("/api/goal", json={"place": PLACE})  # navigation is not jammed
     assert again.status_code == 200
     handle = robot.call(lambda: robot.bus.actions.active(topics.NAVIGATE_TO))
-    assert handle is not None and handle.goal_id == again.json()["goal_id"]
+    assert handle is not None
+    assert handle.goal_id == again.json()["goal_id"]
     assert operator.post("/api/cancel").status_code == 200
 
 
 def test_ten_simultaneous_questions_all_answer_and_the_brain_stays_up(robot: Any) -> None:
-    def ask(i: int) -> tuple[int, float]:
-        t0 = time.monotonic()
-        resp = httpx.post(f"{robot.url}/api/talk/text", json={"text": f"hello number {i}"},
-                          timeout=ANSWER_BOUND_S)
-        return resp.status_code, time.monotonic() - t0
+    def ask(text: str) -> httpx.Response:
+        return httpx.post(f"{robot.url}/api/talk/text", json={"text": text}, timeout=ANSWER_BOUND_S)
 
-    with ThreadPoolExecutor(10) as pool:
-        answers = list(pool.map(ask, range(10)))
-    codes = [c for c, _ in answers]
+    with ThreadPoolExecutor(10) as pool:  # each answers within ANSWER_BOUND_S, or raises
+        codes = [r.status_code for r in pool.map(ask, (f"hello number {i}" for i in range(10)))]
     assert set(codes) <= {200, 429}, codes  # answered, or over the per-address limit
     assert codes.count(200) >= 5  # the limit's burst: these were answered, none was dropped
-    assert max(t for _, t in answers) < ANSWER_BOUND_S
-    deadline = time.monotonic() + 10.0  # the limiter refills one question every 3 s
-    while True:
-        later = httpx.post(f"{robot.url}/api/talk/text", json={"text": "are you still there?"},
-                           timeout=ANSWER_BOUND_S)
-        if later.status_code != 429 or time.monotonic() > deadline:
-            break
-        time.sleep(0.5)
-    assert later.status_code == 200 and later.json()["reply"], later.text
+
+    def let_through() -> httpx.Response | None:
+        resp = ask("are you still there?")
+        return None if resp.status_code == 429 else resp
+
+    # the limiter refills one question every 3 s
+    later = wait_until(let_through, "the rate limiter to let a question through", ANSWER_BOUND_S, poll=0.5)
+    assert later.status_code == 200, later.text
+    assert later.json()["reply"], later.text

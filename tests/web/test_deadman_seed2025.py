@@ -9,26 +9,17 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-import httpx
 import pytest
-from websockets.sync.client import connect
 
+from ..support.waits import wait_until
 from .conftest import SimRobot, sim_robot
-
-WAIT_S = 5.0
+from .wsclient import teleop_ws
 
 
 @pytest.fixture(scope="module")
 def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimRobot]:
     with sim_robot(tmp_path_factory, "web-seed", mcu={"firmware": "seed-2025"}) as sim:
         yield sim
-
-
-@pytest.fixture(scope="module")
-def cookie(robot: Any) -> str:
-    resp = httpx.post(f"{robot.url}/api/login", json={"password": robot.password})
-    assert resp.status_code == 200
-    return f"sage_session={resp.cookies['sage_session']}"
 
 
 def _firmware(robot: Any) -> Any:
@@ -57,18 +48,6 @@ def _after(applied: list[tuple[float, float]], first: float, then: float) -> boo
     return first in vs and then in vs[vs.index(first):]
 
 
-def _wait(cond: Any, what: str) -> None:
-    deadline = time.monotonic() + WAIT_S
-    while time.monotonic() < deadline and not cond():
-        time.sleep(0.005)
-    assert cond(), what
-
-
-def _teleop(robot: Any, cookie: str) -> Any:
-    url = robot.url.replace("http://", "ws://") + "/ws/teleop"
-    return connect(url, additional_headers={"Cookie": cookie}, open_timeout=WAIT_S)
-
-
 def test_the_seed_firmware_runs_here(robot: Any) -> None:
     assert type(_firmware(robot)).__name__ == "Seed2025Model"
     assert robot.call(lambda: robot.launcher.nodes["serial_bridge"].stats()["firmware"]) == "seed-2025"
@@ -78,10 +57,10 @@ def test_the_deadman_stop_reaches_the_seed_firmware(robot: Any, cookie: str) -> 
     applied = _record_applied(robot)
     teleop = robot.web_node().teleop
     stops = teleop.counts["deadman_stops"]
-    with _teleop(robot, cookie) as ws:
+    with teleop_ws(robot, cookie) as ws:
         ws.send(json.dumps({"type": "control", "x": 0.3, "z": 0.0}))  # then the operator goes silent
-        _wait(lambda: teleop.counts["deadman_stops"] > stops, "the deadman fired")
-        _wait(lambda: _after(applied, 0.3, 0.0), "0.3 m/s reached the firmware, then the deadman's stop")
+        wait_until(lambda: teleop.counts["deadman_stops"] > stops, "the deadman fired")
+        wait_until(lambda: _after(applied, 0.3, 0.0), "0.3 m/s reached the firmware, then the deadman's stop")
     assert _firmware(robot).last_command == (0.0, 0.0)
 
 
@@ -89,11 +68,11 @@ def test_the_estop_reaches_the_seed_firmware(robot: Any, cookie: str) -> None:
     applied = _record_applied(robot)
     fw = _firmware(robot)
     teleop = robot.web_node().teleop
-    with _teleop(robot, cookie) as ws:
+    with teleop_ws(robot, cookie) as ws:
         for _ in range(3):  # the page repeats a held command every 0.1 s
             ws.send(json.dumps({"type": "control", "x": 0.3, "z": 0.0}))
-            time.sleep(0.1)
+            time.sleep(0.1)  # the operator's cadence, not a wait for anything
         ws.send(json.dumps({"type": "estop", "engaged": True}))
-        _wait(lambda: _after(applied, 0.3, 0.0), "driving, then the e-stop's stop reached the firmware")
-        _wait(lambda: fw.last_command == (0.0, 0.0), "the firmware holds the stop")
+        wait_until(lambda: _after(applied, 0.3, 0.0), "driving, then the e-stop's stop reached the firmware")
+        wait_until(lambda: fw.last_command == (0.0, 0.0), "the firmware holds the stop")
     robot.run(teleop.set_estop(False, "test"))

@@ -16,21 +16,12 @@ from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
 
 from sage_robot.core import topics
+from sage_robot.core.actions import CANCEL_WAIT_S
 from sage_robot.core.msgs import Twist
 
-WAIT_S = 5.0
-
-
-@pytest.fixture(scope="module")
-def client(robot: Any) -> httpx.Client:
-    return httpx.Client(base_url=robot.url, timeout=30.0)
-
-
-@pytest.fixture(scope="module")
-def cookie(robot: Any) -> str:
-    resp = httpx.post(f"{robot.url}/api/login", json={"password": robot.password})
-    assert resp.status_code == 200
-    return f"sage_session={resp.cookies['sage_session']}"
+from ..support.grids import blank
+from ..support.waits import wait_until
+from .wsclient import WAIT_S, recv_json, teleop_ws, ws_url
 
 
 @pytest.fixture(scope="module")
@@ -42,25 +33,6 @@ def cmd_log(robot: Any) -> list[tuple[float, Twist]]:
 
     robot.call(lambda: robot.bus.subscribe(topics.CMD_VEL, Twist, record))
     return log
-
-
-def ws_url(robot: Any, path: str) -> str:
-    return robot.url.replace("http://", "ws://") + path
-
-
-def teleop_ws(robot: Any, cookie: str, origin: str | None = None) -> Any:
-    url, headers = ws_url(robot, "/ws/teleop"), {"Cookie": cookie}
-    if origin:
-        return connect(url, origin=origin, additional_headers=headers, open_timeout=WAIT_S)
-    return connect(url, additional_headers=headers, open_timeout=WAIT_S)
-
-
-def recv_json(ws: Any, kind: str, timeout: float = WAIT_S) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout
-    while True:
-        msg = json.loads(ws.recv(timeout=max(0.01, deadline - time.monotonic())))
-        if msg.get("type") == kind:
-            return msg  # type: ignore[no-any-return]
 
 
 def test_control_sockets_and_operator_api_refuse_without_login(robot: Any, client: httpx.Client) -> None:
@@ -108,12 +80,17 @@ def test_bad_messages_get_an_error_and_the_socket_survives(robot: Any, cookie: s
     assert robot.web_node().teleop.command == (0.0, 0.0)
 
 
+def drain_until_closed(ws: Any, most: int = 20) -> None:
+    """Receive (bounded) until the server closes the socket, which raises ``ConnectionClosed``."""
+    for _ in range(most):
+        ws.recv(timeout=WAIT_S)
+
+
 def test_oversized_message_closes_only_that_socket(robot: Any, cookie: str) -> None:
     with connect(ws_url(robot, "/ws/status"), open_timeout=WAIT_S) as ws:
         ws.send("x" * 100_000)
         with pytest.raises(ConnectionClosed):
-            for _ in range(20):
-                ws.recv(timeout=WAIT_S)
+            drain_until_closed(ws)
     with connect(ws_url(robot, "/ws/status"), open_timeout=WAIT_S) as ws:
         assert recv_json(ws, "estop")
 
@@ -125,18 +102,16 @@ def test_deadman_stops_a_silent_operator(robot: Any, cookie: str, cmd_log: list[
     with teleop_ws(robot, cookie) as ws:
         t_sent = time.monotonic()
         ws.send(json.dumps({"type": "control", "x": 0.3, "z": 0.0}))
-        deadline = t_sent + WAIT_S
-        while time.monotonic() < deadline and teleop.counts["deadman_stops"] == before:
-            time.sleep(0.01)
+        wait_until(lambda: teleop.counts["deadman_stops"] != before, "the deadman to stop")
         silent = time.monotonic() - t_sent
         assert teleop.counts["deadman_stops"] == before + 1
-        assert deadman_s <= silent < deadman_s + 0.5, f"stopped after {silent:.2f} s of silence"
+        # It waited for the silence; how soon after is measured by `sage bench safety` (this
+        # bound, on the wall clock, is only a lenient 10x).
+        assert deadman_s <= silent < 10 * deadman_s, f"stopped after {silent:.2f} s of silence"
         ours = [t for t, m in cmd_log if m.linear_x == 0.3]
         assert ours, "the command reached /cmd_vel"
-        deadline = time.monotonic() + WAIT_S  # the log's subscriber runs on the robot's loop
-        while time.monotonic() < deadline and not any(m.is_zero for t, m in cmd_log if t > ours[-1]):
-            time.sleep(0.01)
-        assert any(m.is_zero for t, m in cmd_log if t > ours[-1]), "a stop after the command"
+        # the log's subscriber runs on the robot's loop
+        wait_until(lambda: any(m.is_zero for t, m in cmd_log if t > ours[-1]), "a stop after the command")
         msg = recv_json(ws, "deadman")  # the page is told why the robot stopped
         assert "stopped" in msg["message"]
     assert teleop.command == (0.0, 0.0)
@@ -154,7 +129,8 @@ def test_commands_are_clamped_to_the_robot_limits(
         ws.send(json.dumps({"type": "ping"}))
         recv_json(ws, "pong")
     fast = [m for _, m in cmd_log if m.linear_x > 0.5]
-    assert fast and fast[-1] == Twist(limits.max_linear_mps, -limits.max_angular_radps)
+    assert fast
+    assert fast[-1] == Twist(limits.max_linear_mps, -limits.max_angular_radps)
 
 
 def test_goal_and_pose_requests_are_validated(robot: Any, client: httpx.Client, cookie: str) -> None:
@@ -164,13 +140,16 @@ def test_goal_and_pose_requests_are_validated(robot: Any, client: httpx.Client, 
                            ({"x": 1e9, "y": 0}, "out of range"),
                            ({"place": ""}, "place")):  # fmt: skip
         resp = client.post("/api/goal", json=body, headers=h)
-        assert resp.status_code == 422 and expected in resp.json()["error"], (body, resp.text)
+        assert resp.status_code == 422, (body, resp.text)
+        assert expected in resp.json()["error"], (body, resp.text)
     resp = client.post("/api/goal", content=b"{not json", headers={**h, "Content-Type": "application/json"})
-    assert resp.status_code == 400 and "JSON" in resp.json()["error"]
+    assert resp.status_code == 400
+    assert "JSON" in resp.json()["error"]
     robot.run(robot.web_node().teleop.set_estop(True, "test"))
     try:
         resp = client.post("/api/goal", json={"x": 1.0, "y": 1.0}, headers=h)
-        assert resp.status_code == 409 and "e-stop" in resp.json()["error"]
+        assert resp.status_code == 409
+        assert "e-stop" in resp.json()["error"]
     finally:
         robot.run(robot.web_node().teleop.set_estop(False, "test"))
     resp = client.post("/api/initial_pose", json={"x": 47.3, "y": 57.5, "theta": math.pi / 2}, headers=h)
@@ -180,9 +159,13 @@ def test_goal_and_pose_requests_are_validated(robot: Any, client: httpx.Client, 
 def test_admin_places_are_validated_and_written(robot: Any, client: httpx.Client, cookie: str) -> None:
     h = {"Cookie": cookie}
     resp = client.post("/api/admin/places", json={"name": "lower case", "x": 1, "y": 1}, headers=h)
-    assert resp.status_code == 422 and "name" in resp.json()["error"]
+    assert resp.status_code == 422
+    assert "name" in resp.json()["error"]
     resp = client.post("/api/admin/places", json={"name": "NOWHERE", "x": -500, "y": -500}, headers=h)
-    assert resp.status_code == 422 and "outside the map" in resp.json()["error"]
+    assert resp.status_code == 422
+    assert "outside the map" in resp.json()["error"]
+    hub = robot.web_node().hub  # "at the robot" needs a pose on the map: localization gives it
+    wait_until(lambda: robot.call(lambda: hub.robot_frame == "map"), "the web to see the robot on the map")
     resp = client.post("/api/admin/places", json={"name": "HERE_NOW", "at_robot": True, "aliases": ["here"]},
                        headers=h)  # fmt: skip
     assert resp.status_code == 200, resp.text
@@ -205,7 +188,8 @@ def test_health_hides_errors_from_visitors(client: httpx.Client, cookie: str) ->
 
 def test_login_attempts_are_rate_limited(robot: Any) -> None:
     codes = [httpx.post(f"{robot.url}/api/login", json={"password": "guess"}).status_code for _ in range(8)]
-    assert codes[0] == 401 and 429 in codes
+    assert codes[0] == 401
+    assert 429 in codes
 
 
 def test_visitor_audio_goes_through_ffmpeg_and_speech_to_text(robot: Any, client: httpx.Client) -> None:
@@ -214,7 +198,8 @@ def test_visitor_audio_goes_through_ffmpeg_and_speech_to_text(robot: Any, client
     if shutil.which("ffmpeg") is None:
         pytest.fail("ffmpeg is missing (apt-get install ffmpeg)")
     resp = client.post("/api/talk/audio", files={"audio": ("x.webm", b"not audio at all", "audio/webm")})
-    assert resp.status_code == 422 and "ffmpeg" in resp.json()["error"]
+    assert resp.status_code == 422
+    assert "ffmpeg" in resp.json()["error"]
     from sage_robot.voice.audio_io import wav_bytes
 
     pcm, rate = tts.synthesize("Where is the clean room?")
@@ -235,7 +220,8 @@ def test_visitor_questions_are_rate_limited(client: httpx.Client) -> None:
     codes = [client.post("/api/talk/text", json={"text": f"question {i}"}).status_code for i in range(12)]
     assert 429 in codes
     limited = client.post("/api/talk/text", json={"text": "one more"})
-    assert limited.status_code == 429 and "Retry-After" in limited.headers
+    assert limited.status_code == 429
+    assert "Retry-After" in limited.headers
     assert "too many" in limited.json()["error"]
 
 
@@ -243,28 +229,27 @@ def test_a_growing_map_reaches_the_page(robot: Any, client: httpx.Client, cookie
     """SLAM republishes /map as it grows: the live socket announces each version, the PNG follows."""
     import io
 
-    import numpy as np
     from PIL import Image
-
-    from sage_robot.core.msgs import OccupancyGrid, Pose2D
 
     with connect(ws_url(robot, "/ws/live"), additional_headers={"Cookie": cookie}, open_timeout=WAIT_S) as ws:
         first = recv_json(ws, "map")
-        grown = OccupancyGrid(0.0, "map", 0.05, Pose2D(-1.0, -1.0, 0.0), np.zeros((30, 50), dtype=np.int8))
+        grown = blank(30, 50, 0.05, (-1.0, -1.0))
         robot.publish(topics.MAP, grown)
         second = recv_json(ws, "map", timeout=WAIT_S)
         while second["version"] == first["version"]:
             second = recv_json(ws, "map", timeout=WAIT_S)
     assert (second["width"], second["height"]) == (50, 30)
     png = client.get(second["url"], headers={"Cookie": cookie})
-    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+    assert png.status_code == 200
+    assert png.headers["content-type"] == "image/png"
     assert Image.open(io.BytesIO(png.content)).size == (50, 30)
 
 
 def test_oversized_upload_is_refused_before_it_is_read(client: httpx.Client) -> None:
     big = b"\0" * (6 * 1024 * 1024)
     resp = client.post("/api/talk/audio", files={"audio": ("long.webm", big, "audio/webm")})
-    assert resp.status_code == 413 and "over" in resp.json()["error"]
+    assert resp.status_code == 413
+    assert "over" in resp.json()["error"]
 
 
 def test_camera_as_mjpeg_for_an_img_tag(robot: Any, cookie: str) -> None:
@@ -281,10 +266,9 @@ def test_camera_as_mjpeg_for_an_img_tag(robot: Any, cookie: str) -> None:
     first = data.split(b"\r\n\r\n", 1)[1]
     assert first[:2] == b"\xff\xd8", "each part is a JPEG"
     hub = robot.web_node().hub
-    deadline = time.monotonic() + WAIT_S  # the stream closed: nobody watches, the sim stops rendering
-    while robot.call(lambda: hub.camera_sub) is not None and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert robot.call(lambda: hub.camera_sub) is None and hub.camera_viewers == 0
+    # the stream closed: nobody watches, the sim stops rendering
+    wait_until(lambda: robot.call(lambda: hub.camera_sub) is None, "the camera to be let go", poll=0.05)
+    assert hub.camera_viewers == 0
 
 
 def test_estop_cancels_a_goal_the_brain_starts_meanwhile(robot: Any) -> None:
@@ -306,7 +290,8 @@ def test_estop_cancels_a_goal_the_brain_starts_meanwhile(robot: Any) -> None:
 def test_knowledge_base_routes_are_mounted_with_the_operator_login(robot: Any, client: httpx.Client) -> None:
     """The KB's router is included; without a running KB node it says so (503) instead of failing."""
     resp = client.get("/api/kb/documents")
-    assert resp.status_code == 503 and "knowledge base" in resp.json()["error"]
+    assert resp.status_code == 503
+    assert "knowledge base" in resp.json()["error"]
     resp = client.delete("/api/kb/documents/1")  # a write: the operator login comes first
     assert resp.status_code == 401
 
@@ -336,23 +321,17 @@ def test_a_wedged_goal_cannot_hold_up_the_estop_or_the_deadman(
     try:
         handle = robot.run(robot.bus.actions.send_goal(name, None))
         before = len(cmd_log)
-        t0 = time.monotonic()
-        robot.run(teleop.set_estop(True, "test"), timeout=1.0)  # never waits on navigation
-        assert time.monotonic() - t0 < 1.0
-        deadline = time.monotonic() + WAIT_S
-        while time.monotonic() < deadline and not any(m.is_zero for _, m in cmd_log[before:]):
-            time.sleep(0.005)
-        assert any(m.is_zero for _, m in cmd_log[before:]), "the e-stop put a stop on /cmd_vel"
-        robot.run(teleop.set_estop(False, "test"), timeout=1.0)
+        # never waits on navigation: an e-stop that awaited the wedged goal would take CANCEL_WAIT_S
+        robot.run(teleop.set_estop(True, "test"), timeout=CANCEL_WAIT_S / 2)
+        wait_until(lambda: any(m.is_zero for _, m in cmd_log[before:]), "the e-stop's stop on /cmd_vel")
+        robot.run(teleop.set_estop(False, "test"), timeout=WAIT_S)
         stops = teleop.counts["deadman_stops"]
         with teleop_ws(robot, cookie) as ws:
-            t_sent = time.monotonic()
             ws.send(json.dumps({"type": "control", "x": 0.3, "z": 0.0}))
-            deadline = t_sent + WAIT_S
-            while time.monotonic() < deadline and teleop.counts["deadman_stops"] == stops:
-                time.sleep(0.005)
-            assert teleop.counts["deadman_stops"] == stops + 1, "the deadman stopped the silent command"
-        assert handle.cancel_requested and not handle.done  # asked to stop; nothing waited for it
+            wait_until(lambda: teleop.counts["deadman_stops"] != stops, "the deadman to stop the silence")
+            assert teleop.counts["deadman_stops"] == stops + 1
+        assert handle.cancel_requested
+        assert not handle.done  # asked to stop; nothing waited for it
     finally:
         robot.call(lambda: (robot.bus.actions.unserve(name), robot.bus.actions.serve(name, original.handler)))
 

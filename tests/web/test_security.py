@@ -19,30 +19,19 @@ from urllib.parse import urlsplit
 import httpx
 import pytest
 import uvicorn
-from websockets.sync.client import connect
 
 from sage_robot.web.app import body_limit
 from sage_robot.web.common import LOGIN_BURST
 from sage_robot.web.node import proxy_options
+
+from ..support.waits import wait_until
+from .wsclient import recv_json, teleop_ws
 
 WAIT_S = 10.0
 FOREIGN = "http://evil.example"
 CHUNK = 64 * 1024
 CHUNKED_TOTAL_BYTES = 200 * 1024 * 1024  # what the client offers to send
 KERNEL_SLACK_BYTES = 32 * 1024 * 1024  # loopback socket buffers the client fills before the cut shows
-
-
-@pytest.fixture(scope="module")
-def client(robot: Any) -> Iterator[httpx.Client]:
-    with httpx.Client(base_url=robot.url, timeout=30.0) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
-def cookie(robot: Any) -> str:
-    resp = httpx.post(f"{robot.url}/api/login", json={"password": robot.password})
-    assert resp.status_code == 200
-    return f"sage_session={resp.cookies['sage_session']}"
 
 
 def own_origin(robot: Any) -> str:
@@ -106,7 +95,8 @@ def chunked_post(url: str, path: str, total: int, headers: dict[str, str] | None
     """POST ``total`` bytes as ``Transfer-Encoding: chunked`` until the server answers or cuts
     the connection; (bytes sent, the response received)."""
     host, port = urlsplit(url).hostname, urlsplit(url).port
-    assert host and port
+    assert host
+    assert port
     extra = "".join(f"{k}: {v}\r\n" for k, v in (headers or {}).items())
     head = (
         f"POST {path} HTTP/1.1\r\nHost: {host}:{port}\r\nContent-Type: application/json\r\n"
@@ -207,8 +197,7 @@ def test_numbers_past_float_range_get_422_naming_the_field(
 
 
 def test_socket_answers_bad_numbers_and_stays_open(robot: Any, cookie: str) -> None:
-    url = robot.url.replace("http://", "ws://") + "/ws/teleop"
-    with connect(url, additional_headers={"Cookie": cookie}, open_timeout=WAIT_S) as ws:
+    with teleop_ws(robot, cookie) as ws:
         bad = (
             '{"type": "control", "x": 1' + "0" * 400 + ', "z": 0}',
             '{"type": "control", "x": 1e400, "z": 0}',
@@ -216,18 +205,10 @@ def test_socket_answers_bad_numbers_and_stays_open(robot: Any, cookie: str) -> N
         )
         for text in bad:
             ws.send(text)
-            reply = recv_type(ws, "error")
+            reply = recv_json(ws, "error")
             assert "number" in reply["error"] or "JSON" in reply["error"], reply
         ws.send(json.dumps({"type": "ping", "t": 7}))
-        assert recv_type(ws, "pong")["t"] == 7
-
-
-def recv_type(ws: Any, kind: str) -> dict[str, Any]:
-    deadline = time.monotonic() + WAIT_S
-    while True:
-        msg = json.loads(ws.recv(timeout=max(0.01, deadline - time.monotonic())))
-        if msg.get("type") == kind:
-            return msg  # type: ignore[no-any-return]
+        assert recv_json(ws, "pong")["t"] == 7
 
 
 # ------------------------------------------------------------------ forwarded addresses
@@ -251,10 +232,7 @@ class EchoClient:
 
     def __enter__(self) -> EchoClient:
         self.thread.start()
-        deadline = time.monotonic() + WAIT_S
-        while not self.server.started:
-            assert time.monotonic() < deadline, "uvicorn did not start"
-            time.sleep(0.01)
+        wait_until(lambda: self.server.started, "uvicorn to start", WAIT_S)
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -13,10 +13,12 @@ import pytest
 from PIL import Image
 
 from sage_robot.core.config import Settings
-from sage_robot.core.msgs import BatteryState, LaserScan, OccupancyGrid, Pose2D
+from sage_robot.core.msgs import BatteryState, LaserScan, Pose2D
 from sage_robot.core.msgs import Path as PathMsg
 from sage_robot.core.msgs.sim import People, Person
 from sage_robot.web import auth, views
+
+from ..support.grids import grid_of
 
 
 def test_generated_password_is_private_stable_and_printed_once(
@@ -36,12 +38,16 @@ def test_generated_password_is_private_stable_and_printed_once(
 
 def test_sessions_check_password_and_expire() -> None:
     s = auth.Sessions("pw", ttl_s=0.0)
-    assert s.check_password("pw") and not s.check_password("pW") and not s.check_password("")
+    assert s.check_password("pw")
+    assert not s.check_password("pW")
+    assert not s.check_password("")
     token = s.create()
     assert not s.valid(token)  # expired at once
     s = auth.Sessions("pw")
     token = s.create()
-    assert s.valid(token) and not s.valid("forged") and not s.valid(None)
+    assert s.valid(token)
+    assert not s.valid("forged")
+    assert not s.valid(None)
     s.revoke(token)
     assert not s.valid(token)
 
@@ -70,7 +76,8 @@ def test_rate_limiter_allows_a_burst_then_refills(monkeypatch: pytest.MonkeyPatc
     assert lim.allow("b")  # per address
     assert lim.retry_after_s("a") == pytest.approx(1.0, abs=0.01)
     now[0] += 1.0
-    assert lim.allow("a") and not lim.allow("a")
+    assert lim.allow("a")
+    assert not lim.allow("a")
 
 
 def test_scan_points_land_in_the_map_frame() -> None:
@@ -92,7 +99,7 @@ def test_map_png_puts_the_highest_y_on_top() -> None:
     data = np.zeros((4, 3), dtype=np.int8)
     data[0, 0] = 100  # row 0 is the bottom of the map
     data[3, 2] = -1
-    grid = OccupancyGrid(0.0, "map", 0.05, Pose2D(), data)
+    grid = grid_of(data, 0.05)
     img = np.asarray(Image.open(io.BytesIO(views.map_png(grid))))
     assert img.shape == (4, 3)
     assert img[3, 0] == 0  # occupied: black, bottom-left of the image
@@ -105,7 +112,9 @@ def test_views_json() -> None:
     assert views.battery_json(BatteryState(0.0, 15.2, float("nan")))["percentage"] is None
     path = PathMsg(0.0, "map", tuple(Pose2D(float(i), 0.0, 0.0) for i in range(1000)))
     pts = views.path_json(path, max_points=10)["points"]
-    assert len(pts) == 10 and pts[0] == [0.0, 0.0] and pts[-1] == [999.0, 0.0]
+    assert len(pts) == 10
+    assert pts[0] == [0.0, 0.0]
+    assert pts[-1] == [999.0, 0.0]
     people = People(0.0, (Person(1, 1.234, 2.0), Person(2, -3.0, 4.5)))
     assert views.people_points(people) == [[1.23, 2.0], [-3.0, 4.5]]
 
@@ -116,16 +125,21 @@ def test_waypoints_file_is_named_shortly_and_the_shipped_one_is_read_only(tmp_pa
 
     shipped = waypoints_info(Settings())  # no nav.waypoints: the file inside the package
     assert shipped["name"] == "campus/waypoints.yaml"
-    assert shipped["shipped"] and not shipped["writable"]
-    assert "read-only" in shipped["note"] and "nav.waypoints" in shipped["note"]
+    assert shipped["shipped"]
+    assert not shipped["writable"]
+    assert "read-only" in shipped["note"]
+    assert "nav.waypoints" in shipped["note"]
     assert shipped["path"].endswith("maps/campus/waypoints.yaml")
     copy = tmp_path / "site" / "waypoints.yaml"
     copy.parent.mkdir()
     own = waypoints_info(load_profile(None, {"nav": {"waypoints": str(copy)}}))
-    assert own["name"] == "site/waypoints.yaml" and own["writable"] and not own["shipped"]
+    assert own["name"] == "site/waypoints.yaml"
+    assert own["writable"]
+    assert not own["shipped"]
     assert own["path"] == str(copy)
     gone = waypoints_info(load_profile(None, {"nav": {"waypoints": str(tmp_path / "no" / "w.yaml")}}))
-    assert not gone["writable"] and "cannot be written" in gone["note"]
+    assert not gone["writable"]
+    assert "cannot be written" in gone["note"]
 
 
 def test_battery_json_carries_the_seed_face_fields_and_unknown_is_null() -> None:
@@ -135,12 +149,15 @@ def test_battery_json_carries_the_seed_face_fields_and_unknown_is_null() -> None
     fields = (known["percentage"], known["pct"], known["is_charging"], known["voltage"])
     assert fields == (72.0, 0.72, True, 15.2)
     unknown = views.battery_json(BatteryState(1.0, math.nan, math.nan, PowerStatus.UNKNOWN))
-    assert unknown["percentage"] is None and unknown["pct"] is None and unknown["voltage"] is None
+    assert unknown["percentage"] is None
+    assert unknown["pct"] is None
+    assert unknown["voltage"] is None
     assert not unknown["is_charging"]
     json.dumps(unknown, allow_nan=False)  # valid JSON for a browser: no NaN
 
 
 def test_the_seed_face_gets_searching_while_sage_says_navigating() -> None:
     state = {"type": "ui_state", "phase": "navigating", "tts_viseme": 0.0}
-    assert views.seed_ui_state(state)["phase"] == "searching" and state["phase"] == "navigating"
+    assert views.seed_ui_state(state)["phase"] == "searching"
+    assert state["phase"] == "navigating"
     assert views.seed_ui_state(dict(state, phase="speaking"))["phase"] == "speaking"

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from sage_robot.core.bus import Topic
 from sage_robot.core.msgs import Event
 from sage_robot.core.node import Node
 
 HEARTBEAT_PERIOD_S = 1.0
+HEARTBEAT = Topic("/sage/heartbeat", Event)
 
 
 class HeartbeatNode(Node):
@@ -19,7 +21,7 @@ class HeartbeatNode(Node):
 
     def _beat(self) -> None:
         self.beats += 1
-        self.bus.publish("/sage/heartbeat", Event(self.clock.now(), self.name, "heartbeat"))
+        self.bus.publish(HEARTBEAT, Event(self.clock.now(), self.name, "heartbeat"))
 
     def stats(self) -> dict[str, int]:
         return {"beats": self.beats}

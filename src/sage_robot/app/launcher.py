@@ -5,6 +5,9 @@ records the error and the restart count, and it is built again after a delay tha
 doubles with each crash (reset once it has run for a while). When a *critical* node
 (MCU link, navigator, teleop bridge) goes down, the launcher commands a stop on
 ``/cmd_vel`` and publishes an event, so no loss of command leaves the robot moving.
+
+The health of every node goes out on ``/sage/health`` (latched; the web pages read it) when
+a node changes state and once per diagnostics period, with ``/diagnostics`` beside it.
 """
 
 from __future__ import annotations
@@ -15,10 +18,19 @@ import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from sage_robot.core import topics
 from sage_robot.core.bus import Bus
 from sage_robot.core.log import get_logger
-from sage_robot.core.msgs import DiagnosticArray, DiagnosticStatus, Event, Level, Twist
-from sage_robot.core.node import CURRENT_NODE, Health, Node, NodeContext, NodeState
+from sage_robot.core.msgs import (
+    DiagnosticArray,
+    DiagnosticStatus,
+    Event,
+    HealthReport,
+    Level,
+    NodeHealth,
+    Twist,
+)
+from sage_robot.core.node import CURRENT_NODE, LAUNCHER, Health, Node, NodeContext, NodeState
 
 BACKOFF_INITIAL_S = 0.5
 BACKOFF_MAX_S = 10.0
@@ -63,7 +75,8 @@ class Launcher:
         self._rates: dict[tuple[str, str], float] = {}  # (node, topic) -> Hz over the last period
         self._rate_base: tuple[float, dict[tuple[str, str], int]] = (ctx.clock.now(), {})
         self._remove_tap = ctx.bus.add_tap(self._count)
-        ctx.resources["launcher"] = self
+        self.bus.declare(topics.HEALTH, latched=True)
+        ctx.resources[LAUNCHER] = self
 
     # ---------------------------------------------------------------- public
     async def start(self) -> None:
@@ -73,6 +86,7 @@ class Launcher:
                 self._supervise(spec), name=f"supervise:{spec.name}"
             )
         self._diag = self.ctx.clock.every(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics, "diagnostics")
+        self._publish_health()
 
     async def run(self) -> None:
         """Start, then wait until :meth:`request_stop` (or a signal), then stop cleanly."""
@@ -82,6 +96,9 @@ class Launcher:
 
     def request_stop(self) -> None:
         self._stop_event.set()
+
+    def node_names(self) -> list[str]:
+        return [s.name for s in self.specs]
 
     def install_signal_handlers(self) -> None:
         loop = asyncio.get_running_loop()
@@ -106,10 +123,31 @@ class Launcher:
 
     def health_report(self) -> dict[str, dict[str, object]]:
         """Every node: state, restarts, last error, its own stats and its topics' rates (Hz)."""
+        self._refresh_stats()
+        return {name: {**h.as_dict(), "topics": self.topic_rates(name)} for name, h in self.health.items()}
+
+    def health_msg(self) -> HealthReport:
+        """:meth:`health_report` as the message published on ``/sage/health``."""
+        self._refresh_stats()
+        nodes = tuple(
+            NodeHealth(
+                h.name,
+                h.state.value,
+                h.restarts,
+                h.last_error,
+                h.started_at,
+                h.critical,
+                dict(h.stats),
+                self.topic_rates(name),
+            )
+            for name, h in self.health.items()
+        )
+        return HealthReport(self.ctx.clock.now(), nodes)
+
+    def _refresh_stats(self) -> None:
         for name, node in self.nodes.items():
             with contextlib.suppress(Exception):
                 self.health[name].stats = node.stats()
-        return {name: {**h.as_dict(), "topics": self.topic_rates(name)} for name, h in self.health.items()}
 
     # ---------------------------------------------------------------- internals
     def _count(self, topic: str, msg: object) -> None:
@@ -135,6 +173,7 @@ class Launcher:
         clock = self.ctx.clock
         while not self._stopping:
             health.state = NodeState.STARTING
+            self._publish_health()
             node: Node | None = None
             started = clock.now()
             try:
@@ -143,9 +182,11 @@ class Launcher:
                 await node.setup()
                 health.state, health.started_at = NodeState.RUNNING, clock.now()
                 self.log.info("node running", node=spec.name)
+                self._publish_health()
                 await node.run()
                 health.state = NodeState.STOPPED
                 self.log.info("node finished", node=spec.name)
+                self._publish_health()
                 return
             except asyncio.CancelledError:
                 raise
@@ -158,11 +199,13 @@ class Launcher:
                     await self._teardown(spec.name, node)
             if not spec.restart:
                 health.state = NodeState.FAILED
+                self._publish_health()
                 return
             if clock.now() - started > STABLE_AFTER_S:
                 backoff = BACKOFF_INITIAL_S
             health.state = NodeState.BACKOFF
             health.restarts += 1
+            self._publish_health()
             self.log.warning("restarting node", node=spec.name, delay_s=round(backoff, 2))
             await clock.sleep(backoff)
             backoff = min(backoff * 2, BACKOFF_MAX_S)
@@ -184,9 +227,9 @@ class Launcher:
         if not spec.critical:
             return
         self.log.error("critical node down: stopping the robot", node=spec.name)
-        self.bus.publish("/cmd_vel", Twist())
+        self.bus.publish(topics.CMD_VEL, Twist())
         self.bus.publish(
-            "/sage/events",
+            topics.EVENTS,
             Event(self.ctx.clock.now(), "launcher", "safety_stop", f"{spec.name} is down: {reason}"),
         )
 
@@ -202,4 +245,16 @@ class Launcher:
             )
             for name, h in report.items()
         )
-        self.bus.publish("/diagnostics", DiagnosticArray(self.ctx.clock.now(), status))
+        self.bus.publish(topics.DIAGNOSTICS, DiagnosticArray(self.ctx.clock.now(), status))
+        self._publish_health()
+
+    def _publish_health(self) -> None:
+        """The health of every node on ``/sage/health``, as the launcher's own publication
+        (not counted as the node's whose state just changed)."""
+        token = CURRENT_NODE.set("")
+        try:
+            self.bus.publish(topics.HEALTH, self.health_msg())
+        except Exception:  # a report that cannot go out must not stop the supervision
+            self.log.exception("cannot publish the health report")
+        finally:
+            CURRENT_NODE.reset(token)

@@ -17,8 +17,6 @@ from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
 
 SIM_STEP_S = 0.01  # physics step of the simulator (s): the firmware model's 100 Hz loop
 
-# ctx.resources keys
-
 
 def specs_for(mode: str, extra: list[str] | None = None) -> list[NodeSpec]:
     if mode not in PROFILES:

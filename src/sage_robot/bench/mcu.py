@@ -91,9 +91,9 @@ async def _latency_case(n: int) -> dict[str, Any]:
     from sage_robot.core.config import load_profile
     from sage_robot.core.msgs import Twist
     from sage_robot.core.node import NodeContext
-    from sage_robot.hardware.mcu.bridge import SerialBridgeNode
+    from sage_robot.hardware.mcu.bridge import PORT_RESOURCE, SerialBridgeNode
     from sage_robot.sim.firmware import FirmwareModel
-    from sage_robot.sim.mcu_pty import PORT_RESOURCE, PtyMcu
+    from sage_robot.sim.mcu_pty import PtyMcu
 
     clock = WallClock()
     ctx = NodeContext(Bus(clock), clock, load_profile())

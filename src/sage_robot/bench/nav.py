@@ -42,6 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pairs", default="all", help="'all' ordered pairs of places, or N random legs")
     p.add_argument("--seed", type=int, default=7, help="world and goal seed")
     p.add_argument("--speed", type=float, default=4.0, help="simulated time per wall second")
+    p.add_argument("--fast", action="store_true",
+                   help="as fast as the machine allows (the result is the same at any speed)")
     p.add_argument("--people-wait", type=float, default=PEOPLE_WAIT_S,
                    help="nav.people_wait_s: how long to wait for people in the way (s)")
     p.add_argument("--legs-file", default="",
@@ -103,7 +105,7 @@ def _settings(args: argparse.Namespace) -> Any:
     start = "DOCKING_STATION" if "DOCKING_STATION" in places else places.names()[0]
     return Settings.model_validate({
         "nav": {**base, "initial_place": start, "people_wait_s": args.people_wait},
-        "sim": {"world_map": args.map, "speed": args.speed, "seed": args.seed,
+        "sim": {"world_map": args.map, "speed": None if args.fast else args.speed, "seed": args.seed,
                 "pedestrians": args.pedestrians, "clutter": False, "camera_hz": 0},
     }), list(places)
 
@@ -133,7 +135,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     legs = legs[args.first_leg - 1:]
     clutter = _clutter(settings, args.clutter, rng, places)
     head = {"bench": "nav", "map": settings.nav.map or "default building", "pedestrians": args.pedestrians,
-            "clutter": args.clutter, "seed": args.seed, "speed": args.speed, "first_leg": args.first_leg}
+            "clutter": args.clutter, "seed": args.seed, "speed": None if args.fast else args.speed,
+            "first_leg": args.first_leg}
     done: list[dict[str, Any]] = _read_legs(args.legs_file, head, legs) if args.legs_file else []
     todo = legs[len(done):]
     if args.max_legs > 0:
@@ -204,6 +207,7 @@ async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[
     from sage_robot.app.launcher import Launcher, NodeSpec
     from sage_robot.app.runtime import make_context
     from sage_robot.core.clock import SimClock
+    from sage_robot.core.node import SIM_STEP_HOOKS
     from sage_robot.nav.localization import LocalizationNode
     from sage_robot.nav.map_server import MapServerNode
     from sage_robot.nav.navigator import NavigatorNode
@@ -216,11 +220,10 @@ async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[
              NodeSpec("map_server", MapServerNode, False), NodeSpec("localization", LocalizationNode, False),
              NodeSpec("navigator", NavigatorNode, True)]
     launcher = Launcher(ctx, specs)
-    ctx.resources["launcher"] = launcher
     await launcher.start()
     clock = ctx.clock
     assert isinstance(clock, SimClock)
-    hooks = ctx.resources["sim_step_hooks"]
+    hooks = ctx.resources[SIM_STEP_HOOKS]
 
     def physics(dt: float) -> None:
         for hook in hooks:
@@ -250,9 +253,10 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
     from sage_robot.core.geometry import wrap_angle
     from sage_robot.core.msgs.nav import NavigateGoal
     from sage_robot.nav.planner import NoPath, plan
+    from sage_robot.sim.node import WORLD_RESOURCE
 
     clock, bus = ctx.clock, ctx.bus
-    world = ctx.resources["sim_world"]
+    world = ctx.resources[WORLD_RESOURCE]
     nav = launcher.nodes["navigator"]
     static = nav.data.costmap(ctx.settings.robot.radius_m, ctx.settings.nav.inflation_radius_m,
                               ctx.settings.nav.cost_scaling_factor)

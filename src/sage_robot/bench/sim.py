@@ -95,22 +95,42 @@ def _stepping(settings: Any, seconds: float, with_mcu: bool) -> dict[str, Any]:
     }
 
 
-async def _system(settings: Any, seconds: float) -> dict[str, Any]:
-    """sim_world + mcu_sim + serial_bridge on the simulated clock, as fast as possible."""
+SYSTEM_NODES = ("sim_world", "mcu_sim", "serial_bridge")
+# The whole driving stack of `sage sim` (no voice, brain or knowledge base): world, firmware
+# model, serial bridge, localization, navigator, web server; the robot drives to a place.
+FULL_NODES = (*SYSTEM_NODES, "heartbeat", "battery_watchdog", "map_server", "localization",
+              "navigator", "web")
+GOAL_AFTER_S = 1.0  # simulated time after start when the goal is sent
+FULL_GOAL = "3D_PRINTING_LAB"  # a place of the shipped building the robot drives to
+
+
+async def _system(settings: Any, seconds: float, nodes: tuple[str, ...], goal: str = "") -> dict[str, Any]:
+    """The named nodes of the sim profile on the simulated clock, as fast as possible."""
     from sage_robot.app.runtime import SIM_STEP_HOOKS, make_context, run_launcher, specs_for
+    from sage_robot.core import topics
+    from sage_robot.core.msgs.nav import NavigateGoal
+    from sage_robot.sim.node import WORLD_RESOURCE
 
     ctx = make_context(settings, simulated=True)
-    specs = [s for s in specs_for("sim") if s.name in ("sim_world", "mcu_sim", "serial_bridge")]
+    specs = [s for s in specs_for("sim") if s.name in nodes]
     marks: dict[str, float] = {}
+    tasks: list[asyncio.Task[None]] = []
 
     def mark(_dt: float) -> None:
         if "first" not in marks:
             marks["first"], marks["cpu_first"] = time.perf_counter(), time.process_time()
         elif ctx.clock.now() >= seconds - 1.5 * STEP_S and "last" not in marks:  # the last step
             marks["last"], marks["cpu_last"] = time.perf_counter(), time.process_time()
+            marks["distance_m"] = ctx.resources[WORLD_RESOURCE].distance_m
 
     async def after_start(_launcher: Any) -> None:
         ctx.resources[SIM_STEP_HOOKS].append(mark)
+        if goal:  # once the nodes are up (they start on the running clock)
+            tasks.append(asyncio.get_running_loop().create_task(send_goal()))
+
+    async def send_goal() -> None:
+        await ctx.clock.sleep(GOAL_AFTER_S)
+        await ctx.bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=goal))
 
     await run_launcher(ctx, specs, until=seconds, after_start=after_start)
     wall, cpu = marks["last"] - marks["first"], marks["cpu_last"] - marks["cpu_first"]
@@ -118,6 +138,7 @@ async def _system(settings: Any, seconds: float) -> dict[str, Any]:
         "nodes": [s.name for s in specs],
         "real_time_factor": round(seconds / wall, 1) if wall else None,
         "real_time_factor_cpu": round(seconds / cpu, 1) if cpu else None,
+        "distance_m": round(marks["distance_m"], 1),
     }
 
 
@@ -140,5 +161,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "world_mcu": _stepping(settings, args.seconds, with_mcu=True),
     }
     if not args.no_system:
-        result["system"] = asyncio.run(_system(settings, args.seconds))
+        result["system"] = asyncio.run(_system(settings, args.seconds, SYSTEM_NODES))
+        full = load_profile(None, {"sim": {"pedestrians": args.pedestrians, "speed": None, "camera_hz": 0},
+                                   "web": {"port": 0}})
+        result["full_stack"] = {**asyncio.run(_system(full, args.seconds, FULL_NODES, FULL_GOAL)),
+                                "goal": FULL_GOAL}
     return result

@@ -23,9 +23,7 @@ import numpy as np
 
 from sage_robot.bench.voice_wake import (
     ALEXA_PHRASES,
-    FRAME,
     POCKETSPHINX,
-    RATE,
     WAKE_LEAD_S,
     WAKE_MODELS,
     WAKE_PHRASES,
@@ -38,6 +36,7 @@ from sage_robot.bench.voice_wake import (
     wake_sources,
     white_clips,
 )
+from sage_robot.core.audio import FRAME_SAMPLES, SAMPLE_RATE_HZ
 
 PARTIAL_ROUNDS = 5  # final transcriptions alone / with a partial running
 LONG_QUESTIONS = ("Can you tell me where the robotics lab is and whether students work there today?",
@@ -59,13 +58,13 @@ def _stt(stt: Any, speech: Any) -> dict[str, Any]:
     clips = [*sorted(POCKETSPHINX.glob("librivox/*.wav"))[:3], POCKETSPHINX / "goforward.raw"]
     audio = [load_audio(c) for c in clips if c.is_file()]
     if not audio:  # no test data installed: Piper speech instead
-        audio = [resample(speech.synthesize(q), speech.sample_rate, RATE) for q in QUESTIONS[:3]]
+        audio = [resample(speech.synthesize(q), speech.sample_rate, SAMPLE_RATE_HZ) for q in QUESTIONS[:3]]
     rtf = []
     for pcm in audio:
         r = stt.transcribe(pcm)
         rtf.append(r.elapsed_s / r.duration_s)
     return {"stt_rtf_median": round(statistics.median(rtf), 3), "stt_clips": len(rtf),
-            "stt_audio_s": round(sum(len(a) for a in audio) / RATE, 1)}  # fmt: skip
+            "stt_audio_s": round(sum(len(a) for a in audio) / SAMPLE_RATE_HZ, 1)}  # fmt: skip
 
 
 def _tts(speech: Any) -> dict[str, Any]:
@@ -89,13 +88,13 @@ def _frame_cpu(models: Any, settings: Any) -> dict[str, Any]:
     from sage_robot.voice.wake import WakeDetector
 
     rng = np.random.default_rng(3)
-    x = rng.normal(0, 300, FRAME * 200).astype(np.int16)
+    x = rng.normal(0, 300, FRAME_SAMPLES * 200).astype(np.int16)
     models.wake.reset()
     det = WakeDetector.from_settings(models.wake, settings)
     models.vad.reset()
     c0, t0 = time.process_time(), time.perf_counter()
     for i in range(200):
-        frame = x[i * FRAME : (i + 1) * FRAME]
+        frame = x[i * FRAME_SAMPLES : (i + 1) * FRAME_SAMPLES]
         det.feed_frame(frame)
         models.vad.frame_probability(frame)
     cpu_ms = (time.process_time() - c0) / 200 * 1000
@@ -132,9 +131,9 @@ async def _turns(models: Any, settings: Any, speech: Any, questions: tuple[str, 
     task = asyncio.create_task(pipe.run())
 
     def say(text: str) -> np.ndarray:
-        return resample(speech.synthesize(text), speech.sample_rate, RATE)
+        return resample(speech.synthesize(text), speech.sample_rate, SAMPLE_RATE_HZ)
 
-    pause = np.zeros(RATE // 2, dtype=np.int16)
+    pause = np.zeros(SAMPLE_RATE_HZ // 2, dtype=np.int16)
     out = []
     for i in range(turns):
         if partial_on is not None:

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
-RATE = 16000
-FRAME = 1280  # 80 ms
+from sage_robot.core.audio import SAMPLE_RATE_HZ
+
 POCKETSPHINX = Path("/usr/share/pocketsphinx/test/data")  # Debian's pocketsphinx-testdata
 
 WAKE_PHRASES = ("Hey Jarvis.", "Hey Jarvis, where is the lab?")
@@ -59,13 +59,13 @@ def wake_sources(speech: Any, phrases: tuple[str, ...], quick: bool) -> list[tup
     for speed in PIPER_SPEEDS[:2] if quick else PIPER_SPEEDS:
         piper.length_scale = speed
         for phrase in phrases:
-            pcm = resample(piper.synthesize_sentence(phrase), piper.sample_rate, RATE)
+            pcm = resample(piper.synthesize_sentence(phrase), piper.sample_rate, SAMPLE_RATE_HZ)
             out.append((f"piper x{speed} {phrase}", pcm))
     piper.length_scale = None
     for voice in ESPEAK_VOICES[: 1 if quick else None]:
         for wpm in ESPEAK_RATES:
             es = EspeakEngine(voice, wpm)
-            pcm = resample(es.synthesize_sentence(phrases[0]), es.sample_rate, RATE)
+            pcm = resample(es.synthesize_sentence(phrases[0]), es.sample_rate, SAMPLE_RATE_HZ)
             out.append((f"espeak {voice} {wpm}wpm {phrases[0]}", pcm))
     return out
 
@@ -76,7 +76,7 @@ def white_clips(sources: list[tuple[str, np.ndarray]], lead_s: float = 0.0
     ``lead_s`` the clip has that much more before and after the phrase, and the noise
     (at the phrase's SNR) fills it too: the detector hears the noise before the phrase."""
     clips: list[tuple[str, np.ndarray]] = []
-    lead = np.zeros(round(lead_s * RATE), dtype=np.int16)
+    lead = np.zeros(round(lead_s * SAMPLE_RATE_HZ), dtype=np.int16)
     for name, pcm in sources:
         for snr in SNRS_DB:
             rng = np.random.default_rng([WAKE_NOISE_SEED, len(clips)])
@@ -114,10 +114,11 @@ def babble_talkers(speech: Any) -> list[np.ndarray]:
     from sage_robot.voice.tts import EspeakEngine
 
     piper = speech.engine
-    out = [resample(piper.synthesize_sentence(s), piper.sample_rate, RATE) for s in NEUTRAL[:6]]
+    out = [resample(piper.synthesize_sentence(s), piper.sample_rate, SAMPLE_RATE_HZ) for s in NEUTRAL[:6]]
     for voice in ESPEAK_VOICES:
         es = EspeakEngine(voice, ESPEAK_RATES[1])
-        out.append(resample(es.synthesize_sentence(NEUTRAL[6 + len(out) % 6]), es.sample_rate, RATE))
+        pcm = es.synthesize_sentence(NEUTRAL[6 + len(out) % 6])
+        out.append(resample(pcm, es.sample_rate, SAMPLE_RATE_HZ))
     return out
 
 
@@ -126,7 +127,7 @@ def false_rejects(engine: Any, clips: list[tuple[str, np.ndarray]], vs: Any, mod
     """Clips (1 s of silence either side) in which ``model`` is not detected."""
     from sage_robot.voice.wake import WakeDetector
 
-    pad = np.zeros(RATE, dtype=np.int16)
+    pad = np.zeros(SAMPLE_RATE_HZ, dtype=np.int16)
     missed = []
     for name, pcm in clips:
         engine.reset()
@@ -144,22 +145,22 @@ def non_wake_audio(speech: Any, minutes: float) -> np.ndarray:
     from sage_robot.voice.tts import EspeakEngine
 
     rng = np.random.default_rng(5)
-    want = int(minutes * 60 * RATE)
+    want = int(minutes * 60 * SAMPLE_RATE_HZ)
     parts: list[np.ndarray] = [load_audio(p) for p in sorted(POCKETSPHINX.glob("librivox/*.wav"))]
     piper = speech.engine
     for s in NEUTRAL:
-        parts.append(resample(piper.synthesize_sentence(s), piper.sample_rate, RATE))
+        parts.append(resample(piper.synthesize_sentence(s), piper.sample_rate, SAMPLE_RATE_HZ))
     voices = [EspeakEngine(v, r) for v in ESPEAK_VOICES for r in ESPEAK_RATES]
     speech_parts = list(parts)
     k = 0
     while sum(len(p) for p in parts) < want * 0.8:
         es = voices[k % len(voices)]
         s = NEUTRAL[k % len(NEUTRAL)]
-        parts.append(resample(es.synthesize_sentence(s), es.sample_rate, RATE))
+        parts.append(resample(es.synthesize_sentence(s), es.sample_rate, SAMPLE_RATE_HZ))
         speech_parts.append(parts[-1])
         k += 1
     while sum(len(p) for p in parts) < want:  # noise: white, brown, and babble of voices
-        n = 5 * RATE
+        n = 5 * SAMPLE_RATE_HZ
         kind = len(parts) % 3
         if kind == 0:
             parts.append(rng.normal(0, 800, n).astype(np.int16))
@@ -172,7 +173,7 @@ def non_wake_audio(speech: Any, minutes: float) -> np.ndarray:
                 src = speech_parts[j][:n]
                 babble[: len(src)] += src * 0.4
             parts.append(np.clip(babble, -32768, 32767).astype(np.int16))
-    gap = np.zeros(RATE // 2, dtype=np.int16)
+    gap = np.zeros(SAMPLE_RATE_HZ // 2, dtype=np.int16)
     return np.concatenate([x for p in parts for x in (p, gap)])[:want]
 
 
@@ -183,7 +184,7 @@ def false_accepts(engine: Any, audio: np.ndarray, vs: Any, profile_models: Any) 
     engine.reset()
     det = WakeDetector.from_settings(engine, vs)
     found = det.feed(audio)
-    return {"fa_audio_min": round(len(audio) / RATE / 60, 2),
+    return {"fa_audio_min": round(len(audio) / SAMPLE_RATE_HZ / 60, 2),
             "wake_false_accepts": sum(d.model in profile_models for d in found),
             "alexa_false_accepts": sum(d.model == "alexa" for d in found),
             "fa_max_scores": {k: round(v, 3) for k, v in det.max_scores.items()},
@@ -205,7 +206,7 @@ def real_speech_in_noise(engine: Any, vs: Any) -> dict[str, Any]:
     files = sorted(POCKETSPHINX.glob("**/*.wav")) + sorted(POCKETSPHINX.glob("*.raw"))
     if not files:
         return {"real_noisy_audio_s": 0.0, "real_noisy_note": f"no recordings in {POCKETSPHINX}"}
-    gap = np.zeros(RATE // 2, dtype=np.int16)
+    gap = np.zeros(SAMPLE_RATE_HZ // 2, dtype=np.int16)
     speech = np.concatenate([x for f in files for x in (load_audio(f), gap)]).astype(np.float64)
     rng = np.random.default_rng(13)
     found, head_max, gated_max = 0, 0.0, 0.0
@@ -217,6 +218,6 @@ def real_speech_in_noise(engine: Any, vs: Any) -> dict[str, Any]:
         heads = list(det.max_head_gated)
         head_max = max([head_max] + [det.max_smoothed[k] for k in heads])
         gated_max = max([gated_max] + [det.max_head_gated[k] for k in heads])
-    return {"real_noisy_audio_s": round(len(speech) * len(REAL_NOISE_SNRS_DB) / RATE, 1),
+    return {"real_noisy_audio_s": round(len(speech) * len(REAL_NOISE_SNRS_DB) / SAMPLE_RATE_HZ, 1),
             "real_noisy_false_accepts": found, "real_noisy_head_max": round(head_max, 3),
             "real_noisy_head_max_gated": round(gated_max, 3)}  # fmt: skip

@@ -227,9 +227,9 @@ async def _main(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.core.clock import WallClock
     from sage_robot.core.config import load_profile
     from sage_robot.core.node import NodeContext
-    from sage_robot.hardware.mcu.bridge import SerialBridgeNode
+    from sage_robot.hardware.mcu.bridge import PORT_RESOURCE, SerialBridgeNode
     from sage_robot.sim.firmware import FirmwareModel
-    from sage_robot.sim.mcu_pty import PORT_RESOURCE, PtyMcu
+    from sage_robot.sim.mcu_pty import PtyMcu
     from sage_robot.web.node import WebNode
 
     password = os.environ.get(BENCH_PASSWORD_ENV) or "bench-" + os.urandom(6).hex()

@@ -9,6 +9,7 @@ ifs); the first that fires wins. Wake words and greetings at the start are strip
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from sage_robot.brain.matching import PlaceMatch, exact_match, fuzzy_match, match_place
@@ -218,6 +219,78 @@ def _place(slot: str, whole: str, places: Places, strict: bool = False) -> Place
     return match_place(slot, places) or (exact_match(whole, places) if whole != slot else None)
 
 
+# ---------------------------------------------------------------- the rules, in order
+# A rule runs when its pattern is found; it returns the intent, or None to let the
+# rules after it try.
+Rule = Callable[[str, Places], Intent | None]
+
+
+def _named(name: str) -> Rule:
+    """A rule whose pattern alone decides the intent."""
+    return lambda t, places: Intent(name)
+
+
+def _status(t: str, places: Places) -> Intent | None:
+    """Unless the sentence starts with a cancel ("stop, where are you going": cancel)."""
+    return None if CANCEL_FIRST.match(t) else Intent("status")
+
+
+def _tour_theme(t: str) -> str:
+    m = re.search(r"\btour (of|through|around) (the )?(.+)$", t)
+    if not m:
+        return ""
+    theme = m.group(3).strip()
+    return "" if theme in ("building", "place", "college", "campus", "everything") else theme
+
+
+def _tour(t: str, places: Places) -> Intent | None:
+    return Intent("tour", slot=_tour_theme(t))
+
+
+def _where_is(t: str, places: Places) -> Intent | None:
+    slot = _slot_after(WHERE_IS, t)
+    hit = _place(re.sub(r"\b(located|at|from here)$", "", slot).strip(), t, places)
+    if hit:
+        return Intent("where_is", hit.place, slot, hit.how)
+    return Intent("question", slot=t)
+
+
+def _navigate(t: str, places: Places) -> Intent | None:
+    slot = _slot_after(NAVIGATE, t)
+    hit = _place(slot, t, places)
+    return Intent("navigate", hit.place if hit else None, slot, hit.how if hit else "")
+
+
+def _describe(t: str, places: Places) -> Intent | None:
+    slot = _slot_after(DESCRIBE, t)
+    hit = _place(re.sub(r"\b(about|for|used for)$", "", slot).strip(), t, places, strict=True)
+    return Intent("describe_place", hit.place, slot, hit.how) if hit else None
+
+
+def _question(t: str, places: Places) -> Intent | None:
+    """A question of at least two words (the knowledge base is asked)."""
+    return Intent("question", slot=t) if len(t.split()) >= 2 else None
+
+
+RULES: tuple[tuple[re.Pattern[str], Rule], ...] = (
+    (STATUS, _status),
+    (CANCEL, _named("cancel")),
+    (IP, _named("ip_address")),
+    (WHERE_AM_I, _named("where_am_i")),
+    (LIST_PLACES, _named("list_places")),
+    (TOUR, _tour),
+    (WHERE_IS, _where_is),
+    (NAVIGATE, _navigate),
+    (BATTERY, _named("battery")),
+    (DESCRIBE, _describe),
+    (CAPABILITIES, _named("capabilities")),
+    (SMALL_TALK, _named("small_talk")),
+    (GOODBYE, _named("goodbye")),
+    (QUESTION, _question),
+    (QUESTION_INSIDE, _question),
+)
+
+
 def classify(text: str, places: Places) -> Intent:
     """The intent of one visitor utterance."""
     t = strip_wake(prepare(text))
@@ -233,52 +306,13 @@ def classify(text: str, places: Places) -> Intent:
 
 
 def _classify(t: str, places: Places) -> Intent:
-    if STATUS.search(t) and not CANCEL_FIRST.match(t):
-        return Intent("status")
-    if CANCEL.search(t):
-        return Intent("cancel")
-    if IP.search(t):
-        return Intent("ip_address")
-    if WHERE_AM_I.search(t):
-        return Intent("where_am_i")
-    if LIST_PLACES.search(t):
-        return Intent("list_places")
-    if TOUR.search(t):
-        return Intent("tour", slot=_tour_theme(t))
-    if WHERE_IS.search(t):
-        slot = _slot_after(WHERE_IS, t)
-        hit = _place(re.sub(r"\b(located|at|from here)$", "", slot).strip(), t, places)
-        if hit:
-            return Intent("where_is", hit.place, slot, hit.how)
-        return Intent("question", slot=t)
-    if NAVIGATE.search(t):
-        slot = _slot_after(NAVIGATE, t)
-        hit = _place(slot, t, places)
-        return Intent("navigate", hit.place if hit else None, slot, hit.how if hit else "")
-    if BATTERY.search(t):
-        return Intent("battery")
-    if DESCRIBE.search(t):
-        slot = _slot_after(DESCRIBE, t)
-        hit = _place(re.sub(r"\b(about|for|used for)$", "", slot).strip(), t, places, strict=True)
-        if hit:
-            return Intent("describe_place", hit.place, slot, hit.how)
-    if CAPABILITIES.search(t):
-        return Intent("capabilities")
-    if SMALL_TALK.search(t):
-        return Intent("small_talk")
-    if GOODBYE.search(t):
-        return Intent("goodbye")
-    if (QUESTION.search(t) or QUESTION_INSIDE.search(t)) and len(t.split()) >= 2:
-        return Intent("question", slot=t)
+    """The first intent a rule of :data:`RULES` gives, in order; else unknown."""
+    for pattern, rule in RULES:
+        if pattern.search(t):
+            intent = rule(t, places)
+            if intent is not None:
+                return intent
     return Intent("unknown")
-
-
-def _tour_theme(t: str) -> str:
-    m = re.search(r"\btour (of|through|around) (the )?(.+)$", t)
-    if not m:
-        return ""
-    theme = m.group(3).strip()
-    return "" if theme in ("building", "place", "college", "campus", "everything") else theme
 
 
 CONFIRM = re.compile(

@@ -2,8 +2,8 @@
 
 One visitor turn is a loop of streamed model calls: text is cut into sentences and
 handed on as each completes; tool calls are assembled from the stream
-(:mod:`sage_robot.brain.stream`), run through the :class:`ToolRegistry` (schema-checked,
-errors go back to the model) and their results fed back, for at most
+(:mod:`sage_robot.brain.stream`), run through the :class:`ToolRegistry` (arguments validated
+by each tool's model, errors go back to the model) and their results fed back, for at most
 ``llm.max_tool_rounds`` rounds. The ``openai`` client retries 429/5xx/connection errors
 with exponential backoff (``llm.max_retries``, honouring ``Retry-After``). When the
 endpoint still fails before anything was said or done, the robot says so in one

@@ -1,6 +1,8 @@
 """The robot's tools (registered in :data:`sage_robot.brain.tools.TOOLS`).
 
-Navigation and the knowledge base are reached through :class:`RobotLink` (the bus);
+Each tool's arguments are one :class:`ToolArgs` model: the schema the LLM is given is
+generated from it and the registry validates the LLM's arguments with it before the tool
+runs. Navigation and the knowledge base are reached through :class:`RobotLink` (the bus);
 web search through Tavily's HTTP API when a key is set. Every failure a visitor can
 cause, or a missing service, is a :class:`ToolResult` error, never an exception.
 """
@@ -9,12 +11,14 @@ from __future__ import annotations
 
 import math
 import socket
-from typing import Any
+from typing import Annotated, Any
+
+from pydantic import Field
 
 from sage_robot.brain.matching import match_place, places_with_theme
 from sage_robot.brain.readiness import DOCK
 from sage_robot.brain.robot import Outcome
-from sage_robot.brain.tools import ToolContext, ToolResult, no_args, tool
+from sage_robot.brain.tools import NoArgs, ToolArgs, ToolContext, ToolResult, tool
 from sage_robot.core.config import read_secret
 from sage_robot.core.places import Place, Places
 
@@ -22,6 +26,32 @@ KB_PASSAGE_CHARS = 700  # passage text handed to the model per hit
 WEB_TIMEOUT_S = 10.0
 WEB_CONTENT_CHARS = 500  # per web result
 MAX_TOUR_STOPS = 8
+KB_TOP_K_MAX = 10
+WEB_RESULTS_MAX = 8
+TOUR_PLACES_MAX = 12  # places a model may name for one tour (the first MAX_TOUR_STOPS are kept)
+
+
+class SetGoalArgs(ToolArgs):
+    location: str = Field(min_length=1, description="Place name")
+
+
+class KbSearchArgs(ToolArgs):
+    query: str = Field(min_length=1)
+    top_k: int = Field(3, ge=1, le=KB_TOP_K_MAX)
+
+
+class WebSearchArgs(ToolArgs):
+    query: str = Field(min_length=1)
+    max_results: int = Field(3, ge=1, le=WEB_RESULTS_MAX)
+
+
+class DescribePlaceArgs(ToolArgs):
+    name: str = Field(min_length=1)
+
+
+class StartTourArgs(ToolArgs):
+    places: list[Annotated[str, Field(min_length=1)]] | None = Field(None, max_length=TOUR_PLACES_MAX)
+    theme: str | None = None
 
 
 def _place_list(places: Places) -> list[dict[str, str]]:
@@ -57,17 +87,12 @@ def _unknown_place(text: str, places: Places) -> ToolResult:
     "Start driving to a named place (non-blocking: returns at once; an arrival event follows). "
     "One goal at a time. Accepts a place name, an alias or a description. An error means "
     "the robot is NOT moving (e-stop, battery, lost, navigation down): say why, never 'follow me'.",
-    {
-        "type": "object",
-        "properties": {"location": {"type": "string", "minLength": 1, "description": "Place name"}},
-        "required": ["location"],
-        "additionalProperties": False,
-    },
+    SetGoalArgs,
 )
-async def set_goal(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
-    place, places = await _resolve(ctx, args["location"])
+async def set_goal(ctx: ToolContext, args: SetGoalArgs) -> ToolResult:
+    place, places = await _resolve(ctx, args.location)
     if place is None:
-        return _unknown_place(args["location"], places)
+        return _unknown_place(args.location, places)
     out = await ctx.robot.navigate(place)
     if not out.ok:
         return _not_started(out)
@@ -77,8 +102,8 @@ async def set_goal(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
     )
 
 
-@tool("cancel_goal", "Stop the current navigation goal or tour.", no_args())
-async def cancel_goal(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+@tool("cancel_goal", "Stop the current navigation goal or tour.", NoArgs)
+async def cancel_goal(ctx: ToolContext, args: NoArgs) -> ToolResult:
     out = await ctx.robot.cancel()
     return ToolResult(True, dict(out.data)) if out.ok else ToolResult.fail(out.reason)
 
@@ -87,18 +112,10 @@ async def cancel_goal(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
     "kb_search",
     "Search the university's local knowledge base. Use it first for questions about the "
     "university, the college of engineering, its programs, people and buildings.",
-    {
-        "type": "object",
-        "properties": {
-            "query": {"type": "string", "minLength": 1},
-            "top_k": {"type": "integer", "minimum": 1, "maximum": 10, "default": 3},
-        },
-        "required": ["query"],
-        "additionalProperties": False,
-    },
+    KbSearchArgs,
 )
-async def kb_search(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
-    out = await ctx.robot.kb_search(args["query"], int(args.get("top_k", 3)))
+async def kb_search(ctx: ToolContext, args: KbSearchArgs) -> ToolResult:
+    out = await ctx.robot.kb_search(args.query, args.top_k)
     if not out.ok:
         return ToolResult.fail(out.reason)
     hits = [
@@ -114,24 +131,16 @@ async def kb_search(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
 @tool(
     "web_search",
     "Search the internet (general knowledge, current events). Only when the knowledge base has no answer.",
-    {
-        "type": "object",
-        "properties": {
-            "query": {"type": "string", "minLength": 1},
-            "max_results": {"type": "integer", "minimum": 1, "maximum": 8, "default": 3},
-        },
-        "required": ["query"],
-        "additionalProperties": False,
-    },
+    WebSearchArgs,
 )
-async def web_search(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+async def web_search(ctx: ToolContext, args: WebSearchArgs) -> ToolResult:
     import httpx
 
     llm = ctx.settings.llm
     key = read_secret(llm.web_search_key_env, ctx.settings.secrets_file or None)
     if key is None:
         return ToolResult.fail(f"web search is not available: no {llm.web_search_key_env} is set")
-    body = {"query": args["query"], "max_results": int(args.get("max_results", 3))}
+    body = {"query": args.query, "max_results": args.max_results}
     headers = {"Authorization": f"Bearer {key.get_secret_value()}"}
     try:
         async with httpx.AsyncClient(timeout=WEB_TIMEOUT_S) as client:
@@ -176,16 +185,16 @@ def ip_addresses() -> dict[str, list[str]]:
     return found
 
 
-@tool("get_ip_address", "The robot's network addresses, to find it on the network.", no_args())
-async def get_ip_address(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+@tool("get_ip_address", "The robot's network addresses, to find it on the network.", NoArgs)
+async def get_ip_address(ctx: ToolContext, args: NoArgs) -> ToolResult:
     found = ip_addresses()
     if not found:
         return ToolResult.fail("the robot has no network address right now")
     return ToolResult(True, {"interfaces": found})
 
 
-@tool("where_am_i", "Where the robot is now: the nearest named place and how far from it.", no_args())
-async def where_am_i(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+@tool("where_am_i", "Where the robot is now: the nearest named place and how far from it.", NoArgs)
+async def where_am_i(ctx: ToolContext, args: NoArgs) -> ToolResult:
     out = await ctx.robot.where_am_i()
     if not out.ok:
         return ToolResult.fail(out.reason)
@@ -203,8 +212,8 @@ async def where_am_i(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
     )
 
 
-@tool("battery_status", "The robot's battery: charge in percent, voltage and whether charging.", no_args())
-async def battery_status(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+@tool("battery_status", "The robot's battery: charge in percent, voltage and whether charging.", NoArgs)
+async def battery_status(ctx: ToolContext, args: NoArgs) -> ToolResult:
     b = ctx.robot.battery
     if b is None:
         return ToolResult.fail("no battery reading has arrived yet")
@@ -212,8 +221,8 @@ async def battery_status(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
     return ToolResult(True, {"percent": pct, "voltage": round(b.voltage, 2), "status": b.status.value})
 
 
-@tool("list_places", "Every place the robot can go, with a description.", no_args())
-async def list_places(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+@tool("list_places", "Every place the robot can go, with a description.", NoArgs)
+async def list_places(ctx: ToolContext, args: NoArgs) -> ToolResult:
     places = await ctx.robot.places()
     return ToolResult(True, {"places": _place_list(places)})
 
@@ -221,17 +230,12 @@ async def list_places(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
 @tool(
     "describe_place",
     "What a place is: its description and other names.",
-    {
-        "type": "object",
-        "properties": {"name": {"type": "string", "minLength": 1}},
-        "required": ["name"],
-        "additionalProperties": False,
-    },
+    DescribePlaceArgs,
 )
-async def describe_place(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
-    place, places = await _resolve(ctx, args["name"])
+async def describe_place(ctx: ToolContext, args: DescribePlaceArgs) -> ToolResult:
+    place, places = await _resolve(ctx, args.name)
     if place is None:
-        return _unknown_place(args["name"], places)
+        return _unknown_place(args.name, places)
     data = {"name": place.name, "description": place.description, "aliases": list(place.aliases)}
     if place.dwell_text:
         data["talking_points"] = place.dwell_text
@@ -263,22 +267,15 @@ def tour_stops(places: Places, names: list[str] | None, theme: str | None) -> tu
     "Start a guided tour through several places (non-blocking). Give the places in order, or a "
     "theme such as 'labs' or 'robotics', or neither for the standard tour. An error means no "
     "tour started: say why.",
-    {
-        "type": "object",
-        "properties": {
-            "places": {"type": "array", "items": {"type": "string", "minLength": 1}, "maxItems": 12},
-            "theme": {"type": "string"},
-        },
-        "additionalProperties": False,
-    },
+    StartTourArgs,
 )
-async def start_tour(ctx: ToolContext, args: dict[str, Any]) -> ToolResult:
+async def start_tour(ctx: ToolContext, args: StartTourArgs) -> ToolResult:
     places = await ctx.robot.places()
-    stops, unknown = tour_stops(places, args.get("places"), args.get("theme"))
+    stops, unknown = tour_stops(places, args.places, args.theme)
     if unknown:
         return _unknown_place(", ".join(unknown), places)
     if not stops:
-        return ToolResult.fail(f"no place fits the theme {args.get('theme')!r}", places=_place_list(places))
+        return ToolResult.fail(f"no place fits the theme {args.theme!r}", places=_place_list(places))
     out = await ctx.robot.tour([p.name for p in stops])
     if not out.ok:
         return _not_started(out)

@@ -1,11 +1,13 @@
 """The tool registry: what the conversation agent (and the offline brain) can do.
 
-A tool is a name, a description for the model, a JSON schema for its arguments and an
-async function. :meth:`ToolRegistry.call` validates the arguments against the schema and
-turns every expected failure into a :class:`ToolResult` with an error a model can read
-and recover from (unknown place → the list of places); it never raises for bad input.
-Tools register themselves with :func:`tool`; the implementations are in
-:mod:`sage_robot.brain.toolbox`.
+A tool is a name, a description for the model, one pydantic model of its arguments
+(a :class:`ToolArgs`) and an async function that takes them, validated. The JSON schema
+the LLM is given is generated from that model (:func:`openai_parameters`), and the
+arguments the LLM sends are validated by the same model, so the two cannot drift apart.
+:meth:`ToolRegistry.call` turns every expected failure into a :class:`ToolResult` with an
+error a model can read and recover from (bad arguments → what is wrong with each; unknown
+place → the list of places); it never raises for bad input. Tools register themselves
+with :func:`tool`; the implementations are in :mod:`sage_robot.brain.toolbox`.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ import json
 import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
-from jsonschema import Draft202012Validator
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 if TYPE_CHECKING:
     from sage_robot.brain.robot import RobotLink
@@ -51,15 +53,86 @@ class ToolContext:
     settings: Settings
 
 
-ToolFn = Callable[[ToolContext, dict[str, Any]], Awaitable[ToolResult]]
+class ToolArgs(BaseModel):
+    """The arguments of one tool: subclass it with one field per argument (type, limits,
+    default, ``description`` for the model). Arguments it does not name are refused."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class NoArgs(ToolArgs):
+    """The arguments of a tool that takes none."""
+
+
+A = TypeVar("A", bound=ToolArgs)
+ToolFn = Callable[[ToolContext, A], Awaitable[ToolResult]]
+_SCHEMA_DROPPED = frozenset({"title"})  # pydantic's names for the model and its fields
+
+
+def openai_parameters(args: type[ToolArgs]) -> dict[str, Any]:
+    """The JSON schema of ``args`` in the shape of OpenAI function calling: an object with
+    ``properties``, ``required`` (when any) and ``additionalProperties: false``; without
+    pydantic's titles, the model's docstring or ``$defs`` (references are inlined), and an
+    optional argument (``X | None = None``) shown as ``X``, not required (as the model was
+    always told; an explicit ``null`` from it is still accepted, as leaving it out)."""
+    schema = args.model_json_schema()
+    defs = schema.pop("$defs", {})
+    schema.pop("description", None)  # the docstring is for the code; the tool has its own
+
+    def clean(node: Any, seen: tuple[str, ...] = ()) -> Any:
+        if isinstance(node, list):
+            return [clean(n, seen) for n in node]
+        if not isinstance(node, dict):
+            return node
+        if "$ref" in node:
+            name = node["$ref"].rsplit("/", 1)[-1]
+            if name in seen:
+                raise TypeError(f"{args.__name__}: recursive argument types are not for tools")
+            return clean({**defs[name], **{k: v for k, v in node.items() if k != "$ref"}}, (*seen, name))
+        out = {k: ({p: clean(v, seen) for p, v in node[k].items()} if k == "properties" else clean(v, seen))
+               for k, v in node.items() if k not in _SCHEMA_DROPPED}  # fmt: skip
+        branches = out.get("anyOf")
+        if isinstance(branches, list) and {"type": "null"} in branches and len(branches) == 2:
+            out.pop("anyOf")
+            if out.get("default", ...) is None:
+                out.pop("default")
+            out = {**next(b for b in branches if b != {"type": "null"}), **out}
+        return out
+
+    params: dict[str, Any] = clean(schema)
+    params.setdefault("properties", {})
+    if params.get("type") != "object" or params.get("additionalProperties") is not False:
+        raise TypeError(f"{args.__name__}: tool arguments must be a ToolArgs model (an object, no extras)")
+    return params
+
+
+def describe_errors(exc: ValidationError, parameters: dict[str, Any]) -> str:
+    """Pydantic's errors as a line a model can act on: ``where: what is wrong (got what)``."""
+    problems = []
+    for err in exc.errors():
+        where = "/".join(str(p) for p in err["loc"]) or "arguments"
+        if err["type"] == "extra_forbidden":
+            known = ", ".join(parameters.get("properties", {})) or "none"
+            problems.append(f"{where}: unexpected argument (the arguments are: {known})")
+        elif err["type"] == "missing":
+            problems.append(f"{where}: required, missing")
+        else:
+            got = repr(err.get("input"))
+            got = got if len(got) <= 60 else got[:57] + "..."
+            problems.append(f"{where}: {err['msg']} (got {got})")
+    return "; ".join(problems)
 
 
 @dataclass(frozen=True)
-class Tool:
+class Tool(Generic[A]):
     name: str
     description: str
-    parameters: dict[str, Any]
-    fn: ToolFn
+    args: type[A]  # the arguments: the schema the model is given and their validation
+    fn: ToolFn[A]
+    parameters: dict[str, Any] = field(init=False, repr=False)  # generated from ``args``
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "parameters", openai_parameters(self.args))
 
     def spec(self) -> dict[str, Any]:
         """The OpenAI ``tools`` entry."""
@@ -71,6 +144,13 @@ class Tool:
                 "parameters": self.parameters,
             },
         }
+
+    def validate(self, arguments: dict[str, Any]) -> A | str:
+        """The arguments as the tool takes them, or what is wrong with them (for the model)."""
+        try:
+            return self.args.model_validate(arguments)
+        except ValidationError as exc:
+            return f"invalid arguments for {self.name}: {describe_errors(exc, self.parameters)}"
 
 
 @dataclass(frozen=True)
@@ -90,24 +170,20 @@ class ToolCall:
         }
 
 
-TOOLS: dict[str, Tool] = {}
+TOOLS: dict[str, Tool[Any]] = {}
 
 
-def tool(name: str, description: str, parameters: dict[str, Any]) -> Callable[[ToolFn], ToolFn]:
-    """Register ``fn`` as a tool; the schema is checked once, here."""
-    Draft202012Validator.check_schema(parameters)
+def tool(name: str, description: str, args: type[A]) -> Callable[[ToolFn[A]], ToolFn[A]]:
+    """Register ``fn`` as a tool taking ``args`` (:class:`NoArgs` for none); the schema
+    is generated once, here."""
 
-    def wrap(fn: ToolFn) -> ToolFn:
+    def wrap(fn: ToolFn[A]) -> ToolFn[A]:
         if name in TOOLS:
             raise ValueError(f"tool {name!r} registered twice")
-        TOOLS[name] = Tool(name, description, parameters, fn)
+        TOOLS[name] = Tool(name, description, args, fn)
         return fn
 
     return wrap
-
-
-def no_args() -> dict[str, Any]:
-    return {"type": "object", "properties": {}, "additionalProperties": False}
 
 
 class ToolRegistry:
@@ -121,7 +197,6 @@ class ToolRegistry:
             raise ValueError(f"unknown tool(s) {', '.join(unknown)}; known: {', '.join(TOOLS)}")
         self.ctx = ctx
         self.tools = {n: TOOLS[n] for n in (names or list(TOOLS))}
-        self._validators = {n: Draft202012Validator(t.parameters) for n, t in self.tools.items()}
 
     def specs(self) -> list[dict[str, Any]]:
         return [t.spec() for t in self.tools.values()]
@@ -152,14 +227,11 @@ class ToolRegistry:
             )
         if isinstance(args, str):
             return ToolCall(name, shown, ToolResult.fail(args))
-        errors = sorted(self._validators[name].iter_errors(args), key=lambda e: list(e.path))
-        if errors:
-            problems = "; ".join(
-                (f"{'/'.join(map(str, e.path))}: " if e.path else "") + e.message for e in errors
-            )
-            return ToolCall(name, args, ToolResult.fail(f"invalid arguments for {name}: {problems}"))
+        valid = tool_.validate(args)
+        if isinstance(valid, str):
+            return ToolCall(name, args, ToolResult.fail(valid))
         try:
-            result = await tool_.fn(self.ctx, args)
+            result = await tool_.fn(self.ctx, valid)
         except Exception as exc:  # a tool bug must not end the conversation
             _log.exception("tool %s failed", name)
             result = ToolResult.fail(f"{name} failed inside the robot: {exc}")

@@ -96,7 +96,7 @@ def run_replay(args: argparse.Namespace) -> int:
         raise SageError(f"{args.file}: recording not found")
     ctx = make_context(load_profile(args.profile), simulated=False)
     ctx.resources[REPLAY_PATH] = args.file
-    ctx.resources[REPLAY_SPEED] = args.speed
+    ctx.resources[REPLAY_SPEED] = float(args.speed)
     specs = [NodeSpec("replay", node_class("replay"), restart=False)]
     specs += [NodeSpec(n, node_class(n)) for n in args.nodes]
     asyncio.run(run_launcher(ctx, specs))

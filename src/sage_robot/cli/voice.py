@@ -62,6 +62,7 @@ def cmd_transcribe(args: argparse.Namespace) -> int:
 
 
 def cmd_wake(args: argparse.Namespace) -> int:
+    from sage_robot.core.audio import SAMPLE_RATE_HZ
     from sage_robot.voice.audio_io import load_audio
     from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
 
@@ -80,7 +81,7 @@ def cmd_wake(args: argparse.Namespace) -> int:
         "threshold": threshold,
         "thresholds": detector.thresholds,
         "patience": detector.patiences,
-        "duration_s": round(len(pcm) / 16000, 3),
+        "duration_s": round(len(pcm) / SAMPLE_RATE_HZ, 3),
         "detections": [
             {"model": d.model, "time_s": round(d.time_s, 2), "score": round(d.score, 4)} for d in found
         ],

@@ -24,7 +24,7 @@ from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar, overload
 
 from sage_robot.core.clock import Clock, WallClock
 from sage_robot.core.errors import ServiceError, ServiceTimeout, ServiceUnavailable
@@ -37,6 +37,40 @@ DEFAULT_QUEUE = 10  # messages kept per subscriber before the oldest is dropped
 DEFAULT_SERVICE_TIMEOUT_S = 5.0
 
 _log = logging.getLogger("sage.bus")
+
+
+class Topic(str, Generic[M]):
+    """A topic's name and the message type it carries, declared once
+    (:mod:`sage_robot.core.topics`): ``Topic("/odom", Odometry)``.
+
+    It is a ``str`` (equal to and hashing as its name), so it goes wherever a name goes: dict
+    keys, a transport, a recording. To the bus it is typed: ``bus.publish(topics.ODOM,
+    Twist())`` and ``bus.subscribe(topics.ODOM, Twist, ...)`` are type-check errors, and
+    ``bus.latest(topics.MAP)`` is an ``OccupancyGrid | None``. A plain ``str`` name stays
+    accepted, untyped. (mypy words a wrong message type as 'Cannot infer value of type
+    parameter "M" of "publish"': the topic's type and the message's disagree.)
+    """
+
+    msg_type: type[M]
+
+    def __new__(cls, name: str, msg_type: type[M]) -> Topic[M]:
+        self = super().__new__(cls, name)
+        self.msg_type = msg_type
+        return self
+
+    # Pickling and copying rebuild it with its type. This return type also sets a Topic apart
+    # from a plain str to the type checker (see PlainName): keep it.
+    def __getnewargs__(self) -> tuple[str, type[M]]:  # type: ignore[override]
+        return (str(self), self.msg_type)
+
+
+class PlainName(Protocol):
+    """A topic name that is not a :class:`Topic`: any ``str`` matches, a Topic does not (its
+    ``__getnewargs__`` differs). The bus's untyped overloads take this rather than ``str``,
+    so that a Topic with the wrong message type is an error instead of falling through to
+    the untyped overload (a Topic is a ``str``)."""
+
+    def __getnewargs__(self) -> tuple[str]: ...
 
 
 class Transport(ABC):
@@ -174,8 +208,21 @@ class Bus:
         self.actions = ActionRegistry(self)
 
     # ------------------------------------------------------------ topics
-    def declare(self, name: str, msg_type: type, latched: bool = False) -> TopicInfo:
-        """Declare a topic's type (first use wins; a different type later is an error)."""
+    @overload
+    def declare(
+        self, name: Topic[M], msg_type: type[M] | None = None, latched: bool = False
+    ) -> TopicInfo: ...
+    @overload
+    def declare(self, name: PlainName, msg_type: type, latched: bool = False) -> TopicInfo: ...
+    def declare(self, name: Any, msg_type: type | None = None, latched: bool = False) -> TopicInfo:
+        """Declare a topic's type (first use wins; a different type later is an error).
+        A :class:`Topic` brings its own type."""
+        if msg_type is None:
+            if not isinstance(name, Topic):
+                raise TypeError(f"topic {name}: declare it with its message type")
+            msg_type = name.msg_type
+        elif isinstance(name, Topic) and name.msg_type is not msg_type:
+            raise TypeError(f"topic {name} carries {name.msg_type.__name__}, not {msg_type.__name__}")
         info = self._topics.get(name)
         if info is None:
             info = self._topics[name] = TopicInfo(name, msg_type, latched)
@@ -184,16 +231,31 @@ class Bus:
         info.latched = info.latched or latched
         return info
 
-    def publish(self, name: str, msg: Any) -> None:
+    def _info(self, name: str, msg: Any) -> TopicInfo:
+        """The topic's record, declared on first use with its Topic's type (or the message's)."""
+        info = self._topics.get(name)
+        if info is None:
+            info = self.declare(name, name.msg_type if isinstance(name, Topic) else type(msg))
+        return info
+
+    @overload
+    def publish(self, name: Topic[M], msg: M) -> None: ...
+    @overload
+    def publish(self, name: PlainName, msg: Any) -> None: ...
+    def publish(self, name: Any, msg: Any) -> None:
         """Publish on this loop's thread. Other threads use :meth:`publish_threadsafe`."""
-        info = self._topics.get(name) or self.declare(name, type(msg))
+        info = self._info(name, msg)
         if not isinstance(msg, info.msg_type):
             raise TypeError(f"topic {name} carries {info.msg_type.__name__}, got {type(msg).__name__}")
         self._bind_loop()
         self._deliver_local(name, msg)
         self.transport.send(name, msg)
 
-    def publish_threadsafe(self, name: str, msg: Any) -> None:
+    @overload
+    def publish_threadsafe(self, name: Topic[M], msg: M) -> None: ...
+    @overload
+    def publish_threadsafe(self, name: PlainName, msg: Any) -> None: ...
+    def publish_threadsafe(self, name: Any, msg: Any) -> None:
         """Publish from a driver thread (e.g. a serial RX thread)."""
         if self._loop is None or threading.get_ident() == self._loop_thread:
             self.publish(name, msg)
@@ -203,7 +265,7 @@ class Bus:
                 self._loop.call_soon_threadsafe(self.publish, name, msg, context=contextvars.copy_context())
 
     def _deliver_local(self, name: str, msg: Any) -> None:
-        info = self._topics.get(name) or self.declare(name, type(msg))
+        info = self._info(name, msg)
         info.published += 1
         if info.latched:
             info.last = msg
@@ -218,9 +280,25 @@ class Bus:
         self._taps.append(tap)
         return lambda: self._taps.remove(tap) if tap in self._taps else None
 
+    @overload
     def subscribe(
         self,
-        name: str,
+        name: Topic[M],
+        msg_type: type[M],
+        callback: Callable[[M], Any] | None = None,
+        maxsize: int = DEFAULT_QUEUE,
+    ) -> Subscription[M]: ...
+    @overload
+    def subscribe(
+        self,
+        name: PlainName,
+        msg_type: type[M],
+        callback: Callable[[M], Any] | None = None,
+        maxsize: int = DEFAULT_QUEUE,
+    ) -> Subscription[M]: ...
+    def subscribe(
+        self,
+        name: Any,
         msg_type: type[M],
         callback: Callable[[M], Any] | None = None,
         maxsize: int = DEFAULT_QUEUE,
@@ -236,7 +314,11 @@ class Bus:
             sub._start_callback(callback)
         return sub
 
-    def latest(self, name: str) -> Any:
+    @overload
+    def latest(self, name: Topic[M]) -> M | None: ...
+    @overload
+    def latest(self, name: PlainName) -> Any: ...
+    def latest(self, name: Any) -> Any:
         """The last value of a latched topic, or None."""
         info = self._topics.get(name)
         return info.last if info else None

@@ -66,10 +66,15 @@ class Clock(ABC):
         """Call ``callback`` (sync or async) every ``period`` seconds of this clock."""
         return Timer(self, period, callback, name)
 
-    async def offload(self, fn: Callable[..., T], *args: Any) -> T:
+    async def offload(self, fn: Callable[..., T], *args: Any, latency_s: float = 0.0) -> T:
         """``fn(*args)`` in a worker thread (CPU work that releases the GIL: numpy, models),
-        so the event loop goes on. Nodes use this, never ``asyncio.to_thread``: on a
-        simulated clock, simulated time does not pass while the job runs."""
+        so the event loop goes on. Nodes use this, never ``asyncio.to_thread``.
+
+        On a simulated clock the job is lockstep: with ``latency_s`` 0 simulated time does
+        not pass while it runs; with ``latency_s`` > 0 (the time the job is allowed on the
+        robot: a plan, a localization update) simulated time runs on beside the job up to
+        ``now + latency_s``, waits there for it if need be, and the caller gets the result
+        exactly then. Either way a run does not depend on how long the job took."""
         return await asyncio.to_thread(fn, *args)
 
 
@@ -99,20 +104,33 @@ class SimClock(Clock):
         self._now = start
         self._waiters: list[tuple[float, int, asyncio.Future[None]]] = []
         self._seq = itertools.count()
-        self._jobs = 0  # offloaded jobs running now: time waits for them
+        self._jobs: dict[int, float] = {}  # offloaded jobs running now -> when they are due
         self._jobs_done: asyncio.Event | None = None
         self._last_job: asyncio.Future[None] | None = None  # released when its caller has the result
         self.offloaded = 0  # jobs run so far
 
-    async def offload(self, fn: Callable[..., T], *args: Any) -> T:
-        """As :meth:`Clock.offload`; the next step of simulated time waits until the job is
-        done and its caller has taken the result (lockstep), and callers take their results
-        in the order they offloaded (not the order the threads happened to finish), so a run
+    async def offload(self, fn: Callable[..., T], *args: Any, latency_s: float = 0.0) -> T:
+        """As :meth:`Clock.offload`: time does not pass the job's due time (``now + latency_s``)
+        until the job is done. Callers of jobs due at once take their results in the order
+        they offloaded (not the order the threads happened to finish); a job with a latency
+        hands its result over at its due time, in a heap with every other wake-up, so a run
         does not depend on how long the jobs took on this machine."""
+        job = next(self._seq)
+        self.offloaded += 1
+        if latency_s > 0:
+            wake: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+            due = self._now + latency_s
+            heapq.heappush(self._waiters, (due, job, wake))
+            self._jobs[job] = due
+            try:
+                outcome = await self._run_job(fn, args)
+            finally:
+                self._job_done(job)
+            await wake
+            return outcome.result()
         earlier, mine = self._last_job, asyncio.get_running_loop().create_future()
         self._last_job = mine
-        self._jobs += 1
-        self.offloaded += 1
+        self._jobs[job] = self._now
         try:
             result = await asyncio.to_thread(fn, *args)
             if earlier is not None:
@@ -121,12 +139,26 @@ class SimClock(Clock):
         finally:
             if not mine.done():
                 mine.set_result(None)
-            self._jobs -= 1
-            if self._jobs == 0 and self._jobs_done is not None:
-                self._jobs_done.set()
+            self._job_done(job)
 
-    async def _wait_for_jobs(self) -> None:
-        while self._jobs:
+    @staticmethod
+    async def _run_job(fn: Callable[..., T], args: tuple[Any, ...]) -> asyncio.Future[T]:
+        """The job's result or exception, held until it is handed over."""
+        outcome: asyncio.Future[T] = asyncio.get_running_loop().create_future()
+        try:
+            outcome.set_result(await asyncio.to_thread(fn, *args))
+        except Exception as exc:
+            outcome.set_exception(exc)
+        return outcome
+
+    def _job_done(self, job: int) -> None:
+        self._jobs.pop(job, None)
+        if self._jobs_done is not None:
+            self._jobs_done.set()
+
+    async def _wait_for_jobs(self, t: float) -> None:
+        """Until no running job is due by ``t``."""
+        while any(due <= t + TIME_EPS_S for due in self._jobs.values()):
             if self._jobs_done is None:
                 self._jobs_done = asyncio.Event()
             self._jobs_done.clear()
@@ -164,7 +196,7 @@ class SimClock(Clock):
         await self._step_to(self._now + dt)
 
     async def _step_to(self, t: float) -> None:
-        await self._wait_for_jobs()
+        await self._wait_for_jobs(t)
         self.advance_to(t)
         for _ in range(SETTLE_ROUNDS):
             await asyncio.sleep(0)

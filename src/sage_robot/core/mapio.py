@@ -59,6 +59,20 @@ class MapMeta:
 
 
 def _meta_from_yaml(path: Path) -> MapMeta:
+    data = _load_mapping(path)
+    origin = _origin(path, data)
+    resolution, occ, free = _scale_and_thresholds(path, data)
+    mode = str(data.get("mode", "trinary"))
+    if mode not in MODES:
+        raise ConfigError(f"{path}: mode must be one of {', '.join(MODES)}, got {mode!r}")
+    image = Path(str(_need(path, data, "image")))
+    if not image.is_absolute():
+        image = path.parent / image
+    return MapMeta(image, resolution, origin, bool(int(data.get("negate", 0))), occ, free, mode)
+
+
+def _load_mapping(path: Path) -> dict[str, Any]:
+    """The map YAML's top-level mapping."""
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
@@ -67,20 +81,27 @@ def _meta_from_yaml(path: Path) -> MapMeta:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a map_server YAML mapping")
+    return data
 
-    def need(key: str) -> Any:
-        if key not in data:
-            raise ConfigError(f"{path}: missing key '{key}'")
-        return data[key]
 
+def _need(path: Path, data: dict[str, Any], key: str) -> Any:
+    if key not in data:
+        raise ConfigError(f"{path}: missing key '{key}'")
+    return data[key]
+
+
+def _origin(path: Path, data: dict[str, Any]) -> tuple[float, float, float]:
     try:
-        origin = tuple(float(v) for v in need("origin"))
-        if len(origin) != 3:
-            raise ValueError
+        x, y, yaw = (float(v) for v in _need(path, data, "origin"))
     except (TypeError, ValueError):
         raise ConfigError(f"{path}: origin: expected [x, y, yaw], got {data.get('origin')!r}") from None
+    return x, y, yaw
+
+
+def _scale_and_thresholds(path: Path, data: dict[str, Any]) -> tuple[float, float, float]:
+    """(resolution, occupied_thresh, free_thresh), checked."""
     try:
-        resolution = float(need("resolution"))
+        resolution = float(_need(path, data, "resolution"))
         occ = float(data.get("occupied_thresh", DEFAULT_OCCUPIED_THRESH))
         free = float(data.get("free_thresh", DEFAULT_FREE_THRESH))
     except (TypeError, ValueError) as exc:
@@ -89,13 +110,7 @@ def _meta_from_yaml(path: Path) -> MapMeta:
         raise ConfigError(f"{path}: resolution must be > 0 m per cell, got {resolution}")
     if not 0 <= free < occ <= 1:
         raise ConfigError(f"{path}: need 0 <= free_thresh < occupied_thresh <= 1, got {free} and {occ}")
-    mode = str(data.get("mode", "trinary"))
-    if mode not in MODES:
-        raise ConfigError(f"{path}: mode must be one of {', '.join(MODES)}, got {mode!r}")
-    image = Path(str(need("image")))
-    if not image.is_absolute():
-        image = path.parent / image
-    return MapMeta(image, resolution, origin, bool(int(data.get("negate", 0))), occ, free, mode)  # type: ignore[arg-type]
+    return resolution, occ, free
 
 
 def _classify(shade: np.ndarray, alpha: np.ndarray | None, meta: MapMeta) -> np.ndarray:

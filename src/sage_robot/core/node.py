@@ -15,12 +15,15 @@ import threading
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any
+from typing import Any, Protocol, TypeVar, overload
 
-from sage_robot.core.bus import Bus, Subscription
+from sage_robot.core.bus import Bus, PlainName, Subscription, Topic
 from sage_robot.core.clock import Clock, Timer
 from sage_robot.core.config import Settings
 from sage_robot.core.log import StructLogger, get_logger
+from sage_robot.core.resources import ResourceKey, Resources
+
+M = TypeVar("M")
 
 # The node whose code is running: set by the launcher in each node's task, inherited by the
 # tasks, timers, subscriptions and (through Node.start_thread) threads the node creates, so
@@ -28,9 +31,26 @@ from sage_robot.core.log import StructLogger, get_logger
 CURRENT_NODE: contextvars.ContextVar[str] = contextvars.ContextVar("sage_current_node", default="")
 
 
-# ctx.resources key: callables(dt) the simulator's stepper runs before each simulated step
-# (physics of the world and the firmware model). Here, in core, so sim and app share it.
-SIM_STEP_HOOKS = "sim_step_hooks"
+StepHook = Callable[[float], Any]
+
+# Callables(dt) the simulator's stepper runs before each simulated step (physics of the
+# world and the firmware model). Here, in core, so sim and app share it.
+SIM_STEP_HOOKS: ResourceKey[list[StepHook]] = ResourceKey("sim_step_hooks", list)
+
+
+class LauncherHandle(Protocol):
+    """What a node may ask of the launcher that runs it (``ctx.resources[LAUNCHER]``)."""
+
+    def node_names(self) -> list[str]:
+        """The nodes of this launch, running or not."""
+        ...
+
+    def request_stop(self) -> None:
+        """Stop every node and end the run."""
+        ...
+
+
+LAUNCHER: ResourceKey[LauncherHandle] = ResourceKey("launcher", doc="set by the launcher")
 
 
 class NodeState(str, Enum):
@@ -74,8 +94,8 @@ class NodeContext:
     clock: Clock
     settings: Settings
     # Objects shared between nodes of one process that are not messages (e.g. the
-    # simulated world handle for simulator nodes). Keys are documented where set.
-    resources: dict[str, Any] = field(default_factory=dict)
+    # simulated world for simulator nodes), by typed key (declared where the owner is).
+    resources: Resources = field(default_factory=Resources)
 
 
 class Node:
@@ -125,16 +145,40 @@ class Node:
         thread.start()
         return thread
 
+    @overload
     def subscribe(
         self,
-        topic: str,
-        msg_type: type,
-        callback: Callable[[Any], Any] | None = None,
+        topic: Topic[M],
+        msg_type: type[M],
+        callback: Callable[[M], Any] | None = None,
         maxsize: int = 10,
-    ) -> Subscription[Any]:
+    ) -> Subscription[M]: ...
+    @overload
+    def subscribe(
+        self,
+        topic: PlainName,
+        msg_type: type[M],
+        callback: Callable[[M], Any] | None = None,
+        maxsize: int = 10,
+    ) -> Subscription[M]: ...
+    def subscribe(
+        self,
+        topic: Any,
+        msg_type: type[M],
+        callback: Callable[[M], Any] | None = None,
+        maxsize: int = 10,
+    ) -> Subscription[M]:
+        """Subscribe for the node's lifetime (closed when the node stops)."""
         sub = self.bus.subscribe(topic, msg_type, callback, maxsize)
         self._subs.append(sub)
         return sub
+
+    @overload
+    def publish(self, topic: Topic[M], msg: M) -> None: ...
+    @overload
+    def publish(self, topic: PlainName, msg: Any) -> None: ...
+    def publish(self, topic: Any, msg: Any) -> None:
+        self.bus.publish(topic, msg)
 
     async def wait_tasks(self) -> None:
         """Wait forever, or until one of the node's tasks raises (then re-raise it)."""

@@ -22,10 +22,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from sage_robot.core.audio import FRAME_SAMPLES, SAMPLE_RATE_HZ
 from sage_robot.core.errors import DeviceNotConnectedError
 
-PIPELINE_RATE = 16000  # Hz
-FRAME_SAMPLES = 1280  # 80 ms at 16 kHz
 MIC_QUEUE_BLOCKS = 64  # about 5 s of 80 ms blocks before the oldest is dropped
 READ_TIMEOUT_S = 2.0  # no audio for this long: the device is gone
 
@@ -90,11 +89,11 @@ class SoundDeviceMicrophone:
         self.overflows = 0
         import soxr
 
-        self._resampler = soxr.ResampleStream(self.rate, PIPELINE_RATE, 1, dtype="int16")
+        self._resampler = soxr.ResampleStream(self.rate, SAMPLE_RATE_HZ, 1, dtype="int16")
         try:
             self._stream = sd.InputStream(
                 device=self._index, channels=channel + 1, samplerate=self.rate, dtype="int16",
-                blocksize=round(self.rate * FRAME_SAMPLES / PIPELINE_RATE), callback=self._callback,
+                blocksize=round(self.rate * FRAME_SAMPLES / SAMPLE_RATE_HZ), callback=self._callback,
             )  # fmt: skip
             self._stream.start()
         except Exception as exc:

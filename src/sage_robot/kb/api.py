@@ -126,6 +126,16 @@ def make_router(
     while it starts: 503). ``email`` configures ``/api/kb/send-emails`` (None: 503)."""
     router = APIRouter()
     write = [Depends(require_operator)]
+    svc = _service_getter(service)
+    _add_search_route(router, svc)
+    _add_document_routes(router, svc, write)
+    _add_email_route(router, write, email, secrets_file)
+    _add_admin_routes(router)
+    return router
+
+
+def _service_getter(service: ServiceSource) -> Callable[[], KbService]:
+    """The function the routes call for the service: 503 while there is none yet."""
 
     def svc() -> KbService:
         found = service() if callable(service) and not isinstance(service, KbService) else service
@@ -133,14 +143,22 @@ def make_router(
             raise HTTPException(503, "the knowledge base is starting; try again in a moment")
         return found  # type: ignore[return-value]
 
+    return svc
+
+
+# ---------------------------------------------------------------- route registration
+# The handlers are thin: FastAPI reads their signatures (body, files, path parameters);
+# the work is in the module-level functions below them.
+
+
+def _add_search_route(router: APIRouter, svc: Callable[[], KbService]) -> None:
     @router.post("/api/kb/search", response_model=SearchAnswer, tags=["kb"])
     async def search(body: SearchBody) -> dict[str, Any]:
-        kb = svc()
-        try:
-            passages = await asyncio.to_thread(kb.search, body.query, body.top_k)
-        except SearchError as exc:
-            raise HTTPException(422, str(exc)) from None
-        return passages_as_answer(body.query, passages)
+        return await _search(svc(), body)
+
+
+def _add_document_routes(router: APIRouter, svc: Callable[[], KbService], write: list[Any]) -> None:
+    """Documents and their ingest: list, upload, progress, cancel, delete."""
 
     @router.get("/api/kb/documents", response_model=DocumentList, tags=["kb"])
     async def list_documents() -> dict[str, Any]:
@@ -151,27 +169,7 @@ def make_router(
     async def upload(
         files: list[UploadFile] = File(..., description="Documents to ingest"),
     ) -> dict[str, Any]:
-        kb = svc()
-        docs = []
-        for upload_file in files:
-            name = PurePath(upload_file.filename or "").name
-            if not name:
-                raise HTTPException(422, "an uploaded file has no name")
-            # Read in the worker when its turn comes, at most the size limit (kb.max_document_mb).
-            docs.append(PendingDocument(name, name, stream=upload_file.file))
-        try:
-            run = kb.begin_ingest(len(docs))
-        except IngestBusy as exc:
-            raise HTTPException(409, str(exc)) from None
-        try:
-            done = await asyncio.to_thread(kb.ingest_documents, docs, run)
-        except asyncio.CancelledError:  # the server stops: the worker stops at its next check
-            run.cancel()
-            raise
-        results = [r.as_dict() for r in done]
-        if all(r["status"] == "failed" for r in results):
-            raise HTTPException(422, "; ".join(str(r["message"]) for r in results))
-        return {"results": results}
+        return await _upload(svc(), files)
 
     @router.get("/api/kb/ingest", response_model=ProgressOut, tags=["kb"])
     async def ingest_progress() -> dict[str, Any]:
@@ -180,27 +178,23 @@ def make_router(
     @router.post("/api/kb/ingest/cancel", response_model=ProgressOut, status_code=202,
                  dependencies=write, tags=["kb"], responses={409: {"description": "none runs"}})
     async def ingest_cancel() -> dict[str, Any]:
-        kb = svc()
-        if not kb.cancel_ingest():
-            raise HTTPException(409, "no ingest is running")
-        return kb.progress().as_dict()
+        return _cancel_ingest(svc())
 
     @router.delete("/api/kb/documents/{document_id}", status_code=204, dependencies=write,
                    tags=["kb"], response_class=Response)
     async def delete(document_id: int) -> Response:
-        if not await asyncio.to_thread(svc().delete_document, document_id):
-            raise HTTPException(404, f"no document with id {document_id}")
-        return Response(status_code=204)
+        return await _delete_document(svc(), document_id)
 
+
+def _add_email_route(
+    router: APIRouter, write: list[Any], email: EmailSettings | None, secrets_file: str | None
+) -> None:
     @router.post("/api/kb/send-emails", response_model=EmailAnswer, dependencies=write, tags=["kb"])
     async def send_emails(body: EmailBody) -> Any:
-        if email is None or not email.smtp_host:
-            raise HTTPException(503, "e-mail is not configured (email.smtp_host in the profile)")
-        result = await send_mail_async(email, body.subject, body.body, body.recipients, secrets_file)
-        if not result.ok:  # nothing tried = the request was wrong; else the server failed
-            raise HTTPException(422 if result.attempts == 0 else 502, result.error)
-        return result.as_dict()
+        return await _send_emails(email, secrets_file, body)
 
+
+def _add_admin_routes(router: APIRouter) -> None:
     @router.get("/kb/admin", include_in_schema=False)
     async def admin_page() -> FileResponse:
         return FileResponse(ADMIN_DIR / "index.html", media_type="text/html")
@@ -209,4 +203,62 @@ def make_router(
     async def admin_script() -> FileResponse:
         return FileResponse(ADMIN_DIR / "admin.js", media_type="text/javascript")
 
-    return router
+
+# ---------------------------------------------------------------- what the routes do
+
+
+async def _search(kb: KbService, body: SearchBody) -> dict[str, Any]:
+    try:
+        passages = await asyncio.to_thread(kb.search, body.query, body.top_k)
+    except SearchError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return passages_as_answer(body.query, passages)
+
+
+def _pending_documents(files: list[UploadFile]) -> list[PendingDocument]:
+    docs = []
+    for upload_file in files:
+        name = PurePath(upload_file.filename or "").name
+        if not name:
+            raise HTTPException(422, "an uploaded file has no name")
+        # Read in the worker when its turn comes, at most the size limit (kb.max_document_mb).
+        docs.append(PendingDocument(name, name, stream=upload_file.file))
+    return docs
+
+
+async def _upload(kb: KbService, files: list[UploadFile]) -> dict[str, Any]:
+    docs = _pending_documents(files)
+    try:
+        run = kb.begin_ingest(len(docs))
+    except IngestBusy as exc:
+        raise HTTPException(409, str(exc)) from None
+    try:
+        done = await asyncio.to_thread(kb.ingest_documents, docs, run)
+    except asyncio.CancelledError:  # the server stops: the worker stops at its next check
+        run.cancel()
+        raise
+    results = [r.as_dict() for r in done]
+    if all(r["status"] == "failed" for r in results):
+        raise HTTPException(422, "; ".join(str(r["message"]) for r in results))
+    return {"results": results}
+
+
+def _cancel_ingest(kb: KbService) -> dict[str, Any]:
+    if not kb.cancel_ingest():
+        raise HTTPException(409, "no ingest is running")
+    return kb.progress().as_dict()
+
+
+async def _delete_document(kb: KbService, document_id: int) -> Response:
+    if not await asyncio.to_thread(kb.delete_document, document_id):
+        raise HTTPException(404, f"no document with id {document_id}")
+    return Response(status_code=204)
+
+
+async def _send_emails(email: EmailSettings | None, secrets_file: str | None, body: EmailBody) -> Any:
+    if email is None or not email.smtp_host:
+        raise HTTPException(503, "e-mail is not configured (email.smtp_host in the profile)")
+    result = await send_mail_async(email, body.subject, body.body, body.recipients, secrets_file)
+    if not result.ok:  # nothing tried = the request was wrong; else the server failed
+        raise HTTPException(422 if result.attempts == 0 else 502, result.error)
+    return result.as_dict()

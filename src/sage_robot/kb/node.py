@@ -16,9 +16,10 @@ from typing import Any
 from sage_robot.core import topics
 from sage_robot.core.msgs.kb import SearchRequest, SearchResponse
 from sage_robot.core.node import Node
+from sage_robot.core.resources import ResourceKey
 from sage_robot.kb.service import KbService
 
-KB_SERVICE = "kb_service"  # ctx.resources key: the running KbService
+KB_SERVICE = ResourceKey("kb_service", KbService, "the kb node's, while it runs")
 
 
 class KbNode(Node):
@@ -35,9 +36,9 @@ class KbNode(Node):
 
     async def _open(self) -> None:
         try:
-            self.service = await asyncio.to_thread(KbService.from_settings, self.settings.kb)
+            self.service = await self.clock.offload(KbService.from_settings, self.settings.kb)
             if self.settings.kb.load_corpus:
-                results = await asyncio.to_thread(self.service.ensure_corpus)
+                results = await self.clock.offload(self.service.ensure_corpus)
                 self.ingested = sum(r.status in ("added", "replaced") for r in results)
                 for r in results:
                     if not r.ok:
@@ -55,16 +56,16 @@ class KbNode(Node):
         await self._ready.wait()
         if self.service is None:
             raise RuntimeError(f"the knowledge base did not open: {self._failed}")
-        passages = await asyncio.to_thread(self.service.search, request.query, request.top_k)
+        passages = await self.clock.offload(self.service.search, request.query, request.top_k)
         self.searches += 1
         return SearchResponse(tuple(passages))
 
     async def teardown(self) -> None:
         self.bus.unserve(topics.KB_SEARCH)
-        self.ctx.resources.pop(KB_SERVICE, None)
+        self.ctx.resources.pop(KB_SERVICE)
         if self.service is not None:
             service, self.service = self.service, None
-            await asyncio.to_thread(service.close)
+            await self.clock.offload(service.close)
 
     def stats(self) -> dict[str, Any]:
         return {"searches": self.searches, "ingested": self.ingested}

@@ -2,7 +2,7 @@
 
 - Motion: the odometry model for a differential drive (``sample_motion_model_odometry``,
   table 5.6) with AMCL's ``alpha1..4``.
-- Sensor: the likelihood field: each beam endpoint scores
+- Sensor: the likelihood field (:mod:`sage_robot.nav.likelihood`): each beam endpoint scores
   ``z_hit * N(d; 0, sigma_hit) + z_rand / range_max`` where ``d`` is the distance from the
   endpoint to the nearest occupied map cell (``scipy.ndimage.distance_transform_edt``).
   Beams are correlated, so the log-likelihood is tempered by ``BEAM_TEMPER``.
@@ -27,7 +27,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from sage_robot.core.geometry import compose, relative, wrap_angle, wrap_angles
 from sage_robot.core.msgs import OccupancyGrid
@@ -40,12 +39,8 @@ from sage_robot.nav.amcl_global import (
     poses_in,
     search_region,
 )
-from sage_robot.nav.costmap import OCCUPIED_MIN, GridGeometry
+from sage_robot.nav.likelihood import BEAM_TEMPER, LikelihoodField, beam_log_likelihood
 
-SIGMA_HIT_M = 0.2  # AMCL laser_sigma_hit
-Z_HIT, Z_RAND = 0.5, 0.5  # AMCL laser_z_hit / laser_z_rand
-LIKELIHOOD_MAX_DIST_M = 2.0  # AMCL laser_likelihood_max_dist
-BEAM_TEMPER = 0.2  # beams are not independent: log-likelihoods are scaled by this
 # AMCL alpha1..4: rot from rot, rot from trans, trans from trans, trans from rot
 ALPHAS = (0.2, 0.2, 0.2, 0.2)
 UPDATE_MIN_D_M = 0.25  # AMCL update_min_d
@@ -69,76 +64,6 @@ class Estimate:
     y: float
     theta: float
     covariance: tuple[float, ...]
-
-
-class LikelihoodField:
-    """Distance (m) from every cell to the nearest occupied cell, capped, and a free-cell index."""
-
-    def __init__(self, grid: OccupancyGrid) -> None:
-        self.geom = GridGeometry.of(grid)
-        occupied = grid.data >= OCCUPIED_MIN
-        dist = ndimage.distance_transform_edt(~occupied) * grid.resolution
-        self.dist = np.minimum(dist, LIKELIHOOD_MAX_DIST_M).astype(np.float32)
-        self.free_cells = np.argwhere(grid.data == 0)
-        if len(self.free_cells) == 0:
-            raise ValueError("the map has no free cells to localize in")
-        # Flat, padded copy: one border cell at the cap distance takes every point off the map.
-        padded = np.pad(self.dist, 1, constant_values=LIKELIHOOD_MAX_DIST_M)
-        self._width = padded.shape[1]
-        self._rows, self._cols = padded.shape
-        self._flat_dist = padded.ravel()
-        self._log_tables: dict[tuple[float, float], np.ndarray] = {}
-
-    def log_p_table(self, range_max: float, sigma: float = SIGMA_HIT_M) -> np.ndarray:
-        """log(z_hit·N(d; 0, sigma) + z_rand/range_max) per (padded, flat) cell, cached.
-
-        ``d`` is the distance less one cell: a return on a wall's surface lies on the border
-        of an occupied and a free cell and lands in either by rounding, depending on which
-        way the beam travels. Without the shift a place scored better than its mirror image
-        (a beam from the other side rounds the other way), enough to pick the wrong one of
-        two look-alike wings."""
-        table = self._log_tables.get((range_max, sigma))
-        if table is None:
-            d = np.maximum(self._flat_dist - self.geom.resolution, 0.0)
-            p = Z_HIT * np.exp(-0.5 * (d / sigma) ** 2) + Z_RAND / range_max
-            table = np.log(p).astype(np.float32)
-            self._log_tables[(range_max, sigma)] = table
-        return table
-
-    def flat_index(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Index into the padded flat tables; points off the map land on the border."""
-        g = self.geom
-        col = np.clip(((x - g.origin_x) / g.resolution).astype(np.int64) + 1, 0, self._cols - 1)
-        row = np.clip(((y - g.origin_y) / g.resolution).astype(np.int64) + 1, 0, self._rows - 1)
-        return row * self._width + col
-
-    def distances(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Distances at world points; outside the map counts as far from everything."""
-        r, c = self.geom.to_cell(x, y)
-        ok = self.geom.inside(r, c)
-        out = np.full(np.shape(r), LIKELIHOOD_MAX_DIST_M, dtype=np.float32)
-        out[ok] = self.dist[r[ok], c[ok]]
-        return out
-
-
-
-def beam_log_likelihood(field: LikelihoodField, poses: np.ndarray, sensor: tuple[float, float, float],
-                        angles: np.ndarray, ranges: np.ndarray, range_max: float,
-                        sigma: float = SIGMA_HIT_M) -> np.ndarray:
-    """Sum over beams of log(z_hit·N(d; 0, sigma) + z_rand/range_max) for each pose → (N,).
-    ``sensor`` is the lidar's pose in base_link; pass only beams with a return."""
-    sx, sy, st = sensor
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    ox = poses[:, 0] + c * sx - s * sy
-    oy = poses[:, 1] + s * sx + c * sy
-    # cos/sin of (theta_i + st + alpha_j) by the angle-sum rule: outer products, no trig per endpoint
-    ct, stt = np.cos(poses[:, 2] + st).astype(np.float32), np.sin(poses[:, 2] + st).astype(np.float32)
-    bx = (ranges * np.cos(angles)).astype(np.float32)  # beam endpoints in the sensor frame
-    by = (ranges * np.sin(angles)).astype(np.float32)
-    ex = ox.astype(np.float32)[:, None] + np.outer(ct, bx) - np.outer(stt, by)
-    ey = oy.astype(np.float32)[:, None] + np.outer(stt, bx) + np.outer(ct, by)
-    table = field.log_p_table(range_max, sigma)
-    return table[field.flat_index(ex, ey)].sum(axis=1, dtype=np.float64)
 
 
 def kld_count(bins: int, n_min: int, n_max: int) -> int:

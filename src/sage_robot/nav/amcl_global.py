@@ -26,15 +26,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
 
 from sage_robot.core.geometry import wrap_angles
-
-if TYPE_CHECKING:
-    from sage_robot.nav.amcl import LikelihoodField
+from sage_robot.nav.likelihood import SIGMA_HIT_M, LikelihoodField, beam_log_likelihood
 
 CLEARANCE_M = 0.2  # candidate positions keep this far from walls (robot radius 0.25 m)
 LATTICE_M = 0.4  # coarse grid of candidate positions (m)
@@ -113,8 +110,6 @@ def _lattice(field: LikelihoodField, cells: np.ndarray, rng: np.random.Generator
 
 def _score(field: LikelihoodField, poses: np.ndarray, sensor: tuple[float, float, float],
            angles: np.ndarray, ranges: np.ndarray, range_max: float, sigma: float) -> np.ndarray:
-    from sage_robot.nav.amcl import beam_log_likelihood
-
     out = np.empty(len(poses))
     for s in range(0, len(poses), CHUNK):
         out[s:s + CHUNK] = beam_log_likelihood(field, poses[s:s + CHUNK], sensor, angles, ranges,
@@ -133,8 +128,6 @@ def global_poses(field: LikelihoodField, cells: np.ndarray, n: int, sensor: tupl
                  angles: np.ndarray, ranges: np.ndarray, range_max: float,
                  rng: np.random.Generator) -> np.ndarray:
     """The ``n`` poses in ``cells`` that best explain the scan (valid returns only) → (n, 3)."""
-    from sage_robot.nav.amcl import SIGMA_HIT_M
-
     pos = _lattice(field, cells, rng)
     heads = np.linspace(-math.pi, math.pi, HEADINGS, endpoint=False)
     cand = np.repeat(pos, HEADINGS, axis=0)

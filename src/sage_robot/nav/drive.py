@@ -27,6 +27,7 @@ worker thread.
 
 from __future__ import annotations
 
+import asyncio
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -45,11 +46,13 @@ from sage_robot.nav.planner import NoPath, Plan, path_blocked, plan
 
 if TYPE_CHECKING:
     from sage_robot.nav.costmap import Costmap
-    from sage_robot.nav.navigator import NavigatorNode
+    from sage_robot.nav.drive_host import DriveHost
 
 LOCALIZED_WAIT_S = 10.0  # wait this long for a first pose before giving up
 PROGRESS_RESET_M = 1.0  # driving this far after a recovery resets the recovery ladder
 CLEAR_SETTLE_S = 0.5  # after clearing the costmaps, let fresh scans come in (s)
+PLAN_LATENCY_S = 0.1  # time a plan may take (a Jetson's planner on a building map): in the
+#   simulator the robot drives on beside it and the plan arrives exactly this much later (s)
 WATCH_PERIOD_S = 0.5  # how often the intended path is checked while waiting for people (s)
 WATCH_AHEAD_M = 8.0  # how much of the intended path must be free to go on (m)
 SPIN_SPEED_RADPS = 0.6
@@ -84,7 +87,9 @@ class Blocked(Exception):
 
 
 class GoalRun:
-    def __init__(self, node: NavigatorNode, target: Target, feedback: Callable[[Any], None]) -> None:
+    """Drives one goal for ``node`` (anything that is a :class:`~sage_robot.nav.drive_host.DriveHost`)."""
+
+    def __init__(self, node: DriveHost, target: Target, feedback: Callable[[Any], None]) -> None:
         self.node, self.target, self._feedback = node, target, feedback
         nav, robot = node.settings.nav, node.settings.robot
         self.params = ControllerParams(robot.max_linear_mps, robot.max_angular_radps, nav.lookahead_m,
@@ -152,7 +157,7 @@ class GoalRun:
                 cm.refresh()
 
         try:
-            result = await self.clock.offload(work)
+            result = await self.clock.offload(work, latency_s=PLAN_LATENCY_S)
         except NoPath as exc:
             raise Blocked(str(exc)) from None
         node.publish_plan(result.points)
@@ -192,34 +197,48 @@ class GoalRun:
         next_replan = self.clock.now() + replan_period
         lost_since: float | None = None
         self.feedback(NavState.DRIVING)
-        while True:
-            now = self.clock.now()
-            if self.node.lost():
-                lost_since = now if lost_since is None else lost_since
-                if now - lost_since >= LOST_CONFIRM_S:
-                    await self._relocalize()
-                    raise Blocked("relocalized")  # replan from the new pose
-            else:
-                lost_since = None
-            pose = self.pose()
-            self._track(pose)
-            cmd = ctl.step(pose, self.node.local_cm)
-            if cmd.arrived:
-                self.node.stop()
-                self.node.event("arrived", f"arrived at {self.target.spoken}", place=self.target.name)
-                return
-            if cmd.blocked:
-                raise Blocked("an obstacle is in the way")
-            self.node.command(cmd.v, cmd.w)
-            self.remaining = ctl.remaining_m()
-            if now >= next_replan:
-                next_replan = now + replan_period
-                self.feedback(NavState.DRIVING)
-                if not self._near_goal(pose):
-                    fresh = await self._plan()  # raises Blocked when there is no way now
+        replan: asyncio.Future[Plan] | None = None
+        try:
+            while True:
+                now = self.clock.now()
+                lost_since = await self._watch_lost(now, lost_since)
+                pose = self.pose()
+                self._track(pose)
+                cmd = ctl.step(pose, self.node.local_cm)
+                if cmd.arrived:
+                    self.node.stop()
+                    self.node.event("arrived", f"arrived at {self.target.spoken}", place=self.target.name)
+                    return
+                if cmd.blocked:
+                    raise Blocked("an obstacle is in the way")
+                self.node.command(cmd.v, cmd.w)
+                self.remaining = ctl.remaining_m()
+                if replan is not None and replan.done():
+                    fresh, replan = replan.result(), None  # raises Blocked when there is no way now
                     if self._switch(ctl, fresh):
                         current, ctl = fresh, PurePursuit(fresh.points, self.params, self.target.pose[2])
-            await self.clock.sleep(self.dt)
+                if now >= next_replan and replan is None:
+                    next_replan = now + replan_period
+                    self.feedback(NavState.DRIVING)
+                    if not self._near_goal(pose):  # planned beside the control loop, as Nav2's server
+                        replan = asyncio.ensure_future(self._plan())
+                await self.clock.sleep(self.dt)
+        finally:
+            if replan is not None:
+                replan.cancel()  # does nothing to a finished plan
+                if replan.done() and not replan.cancelled():
+                    replan.exception()  # a Blocked nobody took any more: taken here
+
+    async def _watch_lost(self, now: float, lost_since: float | None) -> float | None:
+        """Since when localization has said "lost" (None: it does not); lost for
+        LOST_CONFIRM_S: relocalize and raise Blocked, to replan from the new pose."""
+        if not self.node.lost():
+            return None
+        lost_since = now if lost_since is None else lost_since
+        if now - lost_since >= LOST_CONFIRM_S:
+            await self._relocalize()
+            raise Blocked("relocalized")
+        return lost_since
 
     def _switch(self, ctl: PurePursuit, fresh: Plan) -> bool:
         """Keep following the current path while it is still free and not much longer than the

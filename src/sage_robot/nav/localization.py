@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 from collections import deque
 from typing import Any
 
@@ -39,6 +40,8 @@ FORCED_UPDATES_AFTER_RESET = 8  # filter updates without motion after a global r
 FORCED_UPDATE_PERIOD_S = 0.3  # how often those forced updates may run (s)
 MIN_INITIAL_SIGMA_XY_M = 0.05
 MIN_INITIAL_SIGMA_YAW_RAD = 0.05
+UPDATE_LATENCY_S = 0.05  # time a filter update may take (half a 10 Hz scan period): in the
+#   simulator time runs on beside it and the update lands exactly this much later (s)
 REFINE_SPREAD_M = 0.3  # refine the pose by scan matching only once the cloud is this tight (m)
 
 
@@ -120,7 +123,10 @@ class LocalizationNode(Node):
     async def _global_service(self, _request: Any) -> LocalizationHealth:
         """Relocalize over the whole map from the next scan; answers the health before it."""
         self._global_pending = True
-        return self.health or LocalizationHealth(self.clock.now(), 0.0, True, self.pf.count)
+        if self.health is not None:
+            return self.health
+        async with self._lock:  # the filter is not read while an update runs in its thread
+            return LocalizationHealth(self.clock.now(), 0.0, True, self.pf.count)
 
     # ------------------------------------------------------------ the filter
     async def _scan_loop(self) -> None:
@@ -143,16 +149,13 @@ class LocalizationNode(Node):
             now = self.clock.now()
             force = self._forced > 0 and now - self._last_forced >= FORCED_UPDATE_PERIOD_S
             if force or self.pf.moved_enough(odom):
-                t0 = asyncio.get_running_loop().time()
-                updated = await self.clock.offload(self.pf.update, odom, angles, ranges, scan.range_max,
-                                                   force)
-                self.update_times.append(asyncio.get_running_loop().time() - t0)
-                if updated and force:
+                update = await self.clock.offload(self._update, odom, angles, ranges, scan.range_max,
+                                                  force, latency_s=UPDATE_LATENCY_S)
+                if update is not None and force:
                     self._forced -= 1
                     self._last_forced = now
-                if updated:
-                    self._cloud = await self.clock.offload(self._cloud_stats)
-                    self._fix = await self.clock.offload(self._refine, odom, angles, ranges, scan.range_max)
+                if update is not None:
+                    self._cloud, self._fix = update
                     self._publish_pose(scan.stamp)
             pose = compose(self._fix[0], relative(self._fix[1], odom)) if self._fix else self.pf.pose_at(odom)
         self._map_pose = pose
@@ -165,10 +168,24 @@ class LocalizationNode(Node):
         so this runs once per update, in the worker thread, not on every scan."""
         return self.pf.spread_m(), max(1, len(self.pf.hypotheses()))
 
-    def _refine(self, odom: Pose, angles: np.ndarray, ranges: np.ndarray, range_max: float) -> Fix | None:
+    def _update(self, odom: Pose, angles: np.ndarray, ranges: np.ndarray, range_max: float,
+                force: bool) -> tuple[tuple[float, int], Fix | None] | None:
+        """One filter update (worker thread): the cloud's stats and the refined pose with it, or
+        None when the filter did not update. The node's own fields are set by the caller, on
+        the event loop, when the result is handed over."""
+        t0 = time.perf_counter()
+        updated = self.pf.update(odom, angles, ranges, range_max, force)
+        self.update_times.append(time.perf_counter() - t0)
+        if not updated:
+            return None
+        cloud = self._cloud_stats()
+        return cloud, self._refine(cloud, odom, angles, ranges, range_max)
+
+    def _refine(self, cloud: tuple[float, int], odom: Pose, angles: np.ndarray, ranges: np.ndarray,
+                range_max: float) -> Fix | None:
         """The filter's estimate placed on the map by scan matching, when the cloud is one tight
         hypothesis (a split cloud is not refined: the matcher would only polish one guess)."""
-        spread, hypotheses = self._cloud
+        spread, hypotheses = cloud
         if self._sdf is None or spread > REFINE_SPREAD_M or hypotheses > 1:
             return None
         e, lidar = self.pf.estimate(), self.settings.robot.lidar

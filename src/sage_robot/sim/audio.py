@@ -19,11 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from sage_robot.core.audio import FRAME_S, FRAME_SAMPLES, SAMPLE_RATE_HZ
 from sage_robot.core.clock import Clock
 
-RATE = 16000  # Hz, the microphone's rate
-FRAME_SAMPLES = 1280  # 80 ms
-FRAME_S = FRAME_SAMPLES / RATE
 SPEAKER_BUFFER_S = 0.3  # audio queued ahead in the (simulated) sound card (s)
 MAX_LAG_S = 0.5  # a reader further behind the clock than this skips silent frames
 NOISE_FLOOR_RMS = 30.0  # int16 units: about -60 dBFS of room noise
@@ -32,12 +30,12 @@ MAX_UTTERANCES_KEPT = 50  # the speaker's memory of past utterances (tests, web)
 
 
 def _resample_to_mic(pcm: np.ndarray, rate: int) -> np.ndarray:
-    if rate == RATE:
+    if rate == SAMPLE_RATE_HZ:
         return pcm.astype(np.float32)
     from scipy.signal import resample_poly
 
-    g = gcd(rate, RATE)
-    return resample_poly(pcm.astype(np.float32), RATE // g, rate // g).astype(np.float32)
+    g = gcd(rate, SAMPLE_RATE_HZ)
+    return resample_poly(pcm.astype(np.float32), SAMPLE_RATE_HZ // g, rate // g).astype(np.float32)
 
 
 class SimMicrophone:
@@ -70,18 +68,18 @@ class SimMicrophone:
         """Queue a visitor's audio (16 kHz int16); returns its length in seconds."""
         pcm = np.asarray(pcm16k, dtype=np.int16)
         self._voice.append(pcm)
-        return len(pcm) / RATE
+        return len(pcm) / SAMPLE_RATE_HZ
 
     @property
     def pending_s(self) -> float:
         """Seconds of visitor audio not yet heard."""
-        return sum(len(v) for v in self._voice) / RATE
+        return sum(len(v) for v in self._voice) / SAMPLE_RATE_HZ
 
     def add_echo(self, pcm: np.ndarray, rate: int, at: float, gain: float = ECHO_GAIN) -> None:
         """The speaker's sound reaches the mic from clock time ``at`` on."""
         base = self._echo_t if self._echo_t is not None else self.clock.now()
         x = _resample_to_mic(pcm, rate) * gain
-        offset = round((at - base) * RATE)
+        offset = round((at - base) * SAMPLE_RATE_HZ)
         if offset < 0:
             x, offset = x[-offset:], 0
         end = offset + len(x)
@@ -93,7 +91,7 @@ class SimMicrophone:
         """The speaker stopped: the sound it had not played yet never arrives."""
         now = self.clock.now()
         if self._echo_t is not None:
-            keep = max(0, round((now - self._echo_t) * RATE))
+            keep = max(0, round((now - self._echo_t) * SAMPLE_RATE_HZ))
             self._echo = self._echo[:keep]
 
     def _take_voice(self, n: int) -> np.ndarray:

@@ -32,6 +32,8 @@ from typing import Any
 import numpy as np
 
 from sage_robot.core.node import SIM_STEP_HOOKS, Node
+from sage_robot.core.resources import ResourceKey
+from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
 from sage_robot.sim.firmware import FirmwareModel, SimFirmware, make_firmware
 from sage_robot.sim.flat_floor import FlatFloor, SimBody
 
@@ -41,9 +43,9 @@ FLUSH_BYTES = 256  # write at once when this much waits (ODOM off, e.g. a test's
 LOCKSTEP_WAIT_S = 1.0  # lockstep: longest wait for the kernel to hand written bytes over (wall s)
 LOCKSTEP_POLL_S = 0.0001  # ... looking this often (wall s)
 LINK_NAME = "ttySIM0"
-PORT_RESOURCE = "mcu_port"  # ctx.resources key the serial bridge reads
-WORLD_RESOURCE = "sim_world"  # ctx.resources key of the simulated world, when there is one
-MCU_SIM_RESOURCE = "mcu_sim"  # ctx.resources key of this node (tests, the world)
+# The body the firmware model moves, when a simulated world provides one (the world's)
+SIM_BODY: ResourceKey[SimBody] = ResourceKey("sim_body")
+MCU_SIM_RESOURCE: ResourceKey[McuSimNode] = ResourceKey("mcu_sim")  # this node (tests, the world)
 RUNTIME_SUBDIR = "sage"  # under $XDG_RUNTIME_DIR
 LINK_DIR_PREFIX = "mcu-"  # mcu-<owner pid>-<random>: one per PtyMcu
 _LINK_DIR = re.compile(rf"^{LINK_DIR_PREFIX}(\d+)-")
@@ -233,9 +235,9 @@ class McuSimNode(Node):
 
     The model is the dialect ``mcu.firmware`` names (``sim/firmware/dialects.py``).
 
-    Puts the pty's path in ``ctx.resources["mcu_port"]`` for the serial bridge. The body
-    is ``ctx.resources["sim_world"].body`` when a world provides one (any
-    :class:`SimBody`), else a :class:`FlatFloor` of its own.
+    Puts the pty's path in ``ctx.resources[PORT_RESOURCE]`` for the serial bridge. The body
+    is ``ctx.resources[SIM_BODY]`` when a world provides one (any :class:`SimBody`), else a
+    :class:`FlatFloor` of its own.
     """
 
     name = "mcu_sim"
@@ -256,14 +258,13 @@ class McuSimNode(Node):
         self.pty = PtyMcu(self.firmware, lockstep=self.clock.is_simulated)
         self.ctx.resources[PORT_RESOURCE] = self.pty.port_name
         self.ctx.resources[MCU_SIM_RESOURCE] = self
-        self._hooks: list[Any] = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
+        self._hooks = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
         self._hooks.append(self.physics_step)
         self.log.info("simulated MCU ready", port=self.pty.port_name, pty=self.pty.slave_name)
 
     @property
     def body(self) -> SimBody:
-        world = self.ctx.resources.get(WORLD_RESOURCE)
-        body = getattr(world, "body", None)
+        body = self.ctx.resources.get(SIM_BODY)
         return body if body is not None else self.floor
 
     def physics_step(self, dt: float) -> None:
@@ -278,8 +279,8 @@ class McuSimNode(Node):
         if self.physics_step in getattr(self, "_hooks", []):
             self._hooks.remove(self.physics_step)
         if self.ctx.resources.get(MCU_SIM_RESOURCE) is self:
-            self.ctx.resources.pop(MCU_SIM_RESOURCE, None)
-            self.ctx.resources.pop(PORT_RESOURCE, None)
+            self.ctx.resources.pop(MCU_SIM_RESOURCE)
+            self.ctx.resources.pop(PORT_RESOURCE)
         if hasattr(self, "pty"):
             self.pty.close()
 

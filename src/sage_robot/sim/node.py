@@ -1,18 +1,18 @@
 """The world node ("sim_world"): owns the simulated world and publishes what it senses.
 
 At the very start of ``setup`` (before any ``await``) it puts the :class:`World` in
-``ctx.resources["sim_world"]``; the simulated MCU ("mcu_sim") finds it there and moves
-``world.body`` by the firmware model's wheel speeds. Its own physics hook (in
-``ctx.resources[SIM_STEP_HOOKS]``) steps the people every 10 ms and publishes, on the
-simulated clock: the lidar scan (10 Hz, ``/scan``), ground truth (50 Hz,
-``/sim/ground_truth``), people and the speaker's bearing (10 Hz), collisions as they
+``ctx.resources[WORLD_RESOURCE]`` and its body in ``ctx.resources[SIM_BODY]``; the
+simulated MCU ("mcu_sim") finds the body there and moves it by the firmware model's wheel
+speeds. Its own physics hook (in ``ctx.resources[SIM_STEP_HOOKS]``) steps the people
+every 10 ms and publishes, on the simulated clock: the lidar scan (10 Hz, ``/scan``),
+ground truth (50 Hz, ``/sim/ground_truth``), people and the speaker's bearing (10 Hz), collisions as they
 happen, and camera frames (``camera_hz`` frames per *wall* second: an operator watches
 in real time, so a 50x run does not render 50x the frames; and only while something
 subscribes to the camera topic: nobody watching, nothing rendered).
 
 With no "mcu_sim" node in the launch, it drives the body itself from ``/cmd_vel``
 (ideal tracking, the MCU's 0.55 s watchdog), so a world-only run still moves.
-It also plays a scenario's timed events (``ctx.resources["sim_scenario"]``).
+It also plays a scenario's timed events (``ctx.resources[SCENARIO_RESOURCE]``).
 """
 
 from __future__ import annotations
@@ -26,21 +26,23 @@ from sage_robot.core import topics
 from sage_robot.core.errors import ConfigError, SageError
 from sage_robot.core.msgs import Event, Odometry, Pose2D, Text, Twist
 from sage_robot.core.msgs.voice import Doa
-from sage_robot.core.node import SIM_STEP_HOOKS, Node
+from sage_robot.core.node import LAUNCHER, SIM_STEP_HOOKS, Node
+from sage_robot.core.resources import ResourceKey
+from sage_robot.sim.mcu_pty import MCU_SIM_RESOURCE, SIM_BODY
 from sage_robot.sim.scenario import Scenario, TimedEvent
 from sage_robot.sim.setup import build_world
 from sage_robot.sim.world import Collision, World
 
-WORLD_RESOURCE = "sim_world"  # ctx.resources key of the World
-SCENARIO_RESOURCE = "sim_scenario"  # ctx.resources key of the Scenario being run (optional)
-SUMMARY_RESOURCE = "sim_summary"  # ctx.resources key: dict of scenario goal results etc.
-MCU_NODE = "mcu_sim"  # its node name and its ctx.resources key
+WORLD_RESOURCE = ResourceKey("sim_world", World, "set by the sim_world node")
+SCENARIO_RESOURCE = ResourceKey("sim_scenario", Scenario)  # the Scenario being run (optional)
+# Scenario results: goals, conversations, arrivals (lists of dicts), for `sage sim`'s summary
+SUMMARY_RESOURCE: ResourceKey[dict[str, Any]] = ResourceKey("sim_summary", dict)
+MCU_NODE = "mcu_sim"  # the simulated MCU's node name
 TRUTH_HZ = 50.0
 PEOPLE_HZ = 10.0
 WATCHDOG_S = 0.55  # as the MCU firmware: a command older than this stops the body
 CMD_RESEND_S = 0.05  # a scenario's standing /cmd_vel is re-sent at 20 Hz
 EVENT_SOURCE = "sim"
-VISITOR_SAY = "/sim/visitor_say"  # = topics.SIM_VISITOR_SAY (the voice area's)
 
 
 class WorldNode(Node):
@@ -54,17 +56,17 @@ class WorldNode(Node):
         if not isinstance(world, World):  # a restart keeps the world (and the robot's pose)
             world = build_world(self.settings, self.scenario)
             self.ctx.resources[WORLD_RESOURCE] = world
+        self.ctx.resources[SIM_BODY] = world.body
         self.world: World = world
         self.world.on_collision[:] = [self._on_collision]
         self.summary: dict[str, Any] = self.ctx.resources.setdefault(SUMMARY_RESOURCE, {"goals": []})
         self._failed = asyncio.Event()
         self._error: BaseException | None = None
-        self._hooks: list[Any] = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
+        self._hooks = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
         self._hooks.insert(0, self._physics)
         self.spawn(self._watch(), name="sim_world.watch")
-        launcher = self.ctx.resources.get("launcher")
-        names = [s.name for s in getattr(launcher, "specs", [])]
-        self.direct_drive = MCU_NODE not in names
+        launcher = self.ctx.resources.get(LAUNCHER)
+        self.direct_drive = MCU_NODE not in (launcher.node_names() if launcher is not None else [])
         self._cmd, self._cmd_t = Twist(), -math.inf
         if self.direct_drive:
             self.subscribe(topics.CMD_VEL, Twist, self._on_cmd)
@@ -190,7 +192,8 @@ class WorldNode(Node):
     def _apply_battery(self) -> None:
         """The scenario's initial charge, set once on the firmware model's battery (its
         ``charge``, 0..1) as soon as the simulated MCU node is up."""
-        battery = getattr(getattr(self.ctx.resources.get(MCU_NODE), "firmware", None), "battery", None)
+        mcu = self.ctx.resources.get(MCU_SIM_RESOURCE)
+        battery = getattr(getattr(mcu, "firmware", None), "battery", None)  # not every dialect has one
         if battery is not None and hasattr(battery, "charge"):
             battery.charge = self._battery_pending
             self.log.info("scenario battery set", charge=self._battery_pending)
@@ -213,11 +216,11 @@ class WorldNode(Node):
         elif ev.action == "heard":  # a visitor's words, already transcribed
             self.spawn(self._visitor_heard(ev.value), name="sim_world.heard")
         elif ev.action == "say":  # the voice node speaks it into the simulated microphone
-            self.bus.publish(getattr(topics, "SIM_VISITOR_SAY", VISITOR_SAY), Text(ev.value))
+            self.bus.publish(topics.SIM_VISITOR_SAY, Text(ev.value))
         elif ev.action == "goal":
             self.spawn(self._send_goal(ev.value), name="sim_world.goal")
         elif ev.action == "stop":
-            launcher = self.ctx.resources.get("launcher")
+            launcher = self.ctx.resources.get(LAUNCHER)
             if launcher is not None:
                 launcher.request_stop()
         self.bus.publish(

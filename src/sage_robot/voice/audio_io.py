@@ -1,8 +1,9 @@
 """Audio plumbing: the pipeline's format, resampling, files, browser uploads, framing.
 
-Internally everything is 16 kHz mono int16 (``SAMPLE_RATE``), cut into 80 ms frames
-(``FRAME_SAMPLES``), the unit openWakeWord works in. Resampling uses soxr (a proper
-band-limited resampler); without it, scipy's polyphase filter.
+Internally everything is 16 kHz mono int16 (``SAMPLE_RATE_HZ``), cut into 80 ms frames
+(``FRAME_SAMPLES``), the unit openWakeWord works in; both are defined in
+:mod:`sage_robot.core.audio`. Resampling uses soxr (a proper band-limited resampler);
+without it, scipy's polyphase filter.
 """
 
 from __future__ import annotations
@@ -17,11 +18,9 @@ from typing import IO
 
 import numpy as np
 
+from sage_robot.core.audio import FRAME_SAMPLES, SAMPLE_RATE_HZ
 from sage_robot.core.errors import SageError
 
-SAMPLE_RATE = 16000  # Hz, the pipeline's rate
-FRAME_SAMPLES = 1280  # 80 ms at 16 kHz: one wake-word / pipeline frame
-FRAME_S = FRAME_SAMPLES / SAMPLE_RATE  # 0.08 s
 INT16_FULL_SCALE = 32768.0
 FFMPEG_TIMEOUT_S = 30.0  # longest a decode of an upload may take
 MAX_UPLOAD_BYTES = 20 * 1024 * 1024  # refuse larger browser uploads (about 20 min of Opus)
@@ -46,7 +45,7 @@ def to_int16(pcm: np.ndarray) -> np.ndarray:
     return np.round(scaled).astype(np.int16)
 
 
-def resample(pcm: np.ndarray, rate_in: int, rate_out: int = SAMPLE_RATE) -> np.ndarray:
+def resample(pcm: np.ndarray, rate_in: int, rate_out: int = SAMPLE_RATE_HZ) -> np.ndarray:
     """Band-limited resampling of mono audio; keeps the dtype (int16 or float32)."""
     if rate_in <= 0 or rate_out <= 0:
         raise AudioError(f"sample rates must be positive, got {rate_in} → {rate_out}")
@@ -124,7 +123,7 @@ def decode_upload(data: bytes, name: str = "upload") -> np.ndarray:
     if ffmpeg is None:
         raise AudioError("ffmpeg is not installed (apt-get install ffmpeg)")
     cmd = [ffmpeg, "-hide_banner", "-loglevel", "error", "-i", "pipe:0", "-vn",
-           "-ac", "1", "-ar", str(SAMPLE_RATE), "-f", "s16le", "pipe:1"]  # fmt: skip
+           "-ac", "1", "-ar", str(SAMPLE_RATE_HZ), "-f", "s16le", "pipe:1"]  # fmt: skip
     try:
         proc = subprocess.run(cmd, input=data, capture_output=True, timeout=FFMPEG_TIMEOUT_S)
     except subprocess.TimeoutExpired:

@@ -17,8 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-SAMPLE_RATE = 16000
-WINDOW = 512  # samples (32 ms) per analysis window
+WINDOW = 512  # samples (32 ms at 16 kHz) per analysis window
 HOP = 256  # samples (16 ms) between windows; 5 hops per 80 ms wake frame
 DELAY_SAMPLES = WINDOW - HOP  # output lags input by this many samples (16 ms)
 POWER_SMOOTHING = 0.8  # recursive smoothing of each bin's power per hop (~80 ms)

@@ -19,10 +19,12 @@ import contextlib
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
+from sage_robot.core.audio import SAMPLE_RATE_HZ
 from sage_robot.core.clock import Clock
 from sage_robot.core.config.areas import VoiceSettings
 from sage_robot.core.errors import ConfigError, DeviceNotConnectedError
@@ -30,9 +32,10 @@ from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.sim import SpeakerBearing
 from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
 from sage_robot.core.node import Node
+from sage_robot.core.resources import ResourceKey
 from sage_robot.core.topics import DOA, SIM_SPEAKER, SIM_VISITOR_AUDIO, SIM_VISITOR_SAY, UI_STATE
 from sage_robot.hardware.doa import FRONT_DEG, XVF3800Doa
-from sage_robot.voice.audio_io import SAMPLE_RATE, resample
+from sage_robot.voice.audio_io import resample
 from sage_robot.voice.partial import PartialTranscriber
 from sage_robot.voice.pipeline import VoicePipeline
 from sage_robot.voice.player import Mouth
@@ -42,9 +45,14 @@ from sage_robot.voice.vad import SileroVad
 from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
 from sage_robot.voice.wake_head import load_head
 
+if TYPE_CHECKING:
+    from sage_robot.sim.audio import SimMicrophone, SimSpeaker
+
 T = TypeVar("T")
-SIM_OUT_DIR_KEY = "voice_sim_out_dir"  # ctx.resources: where the sim speaker writes WAV files
-SIM_AUDIO_KEY = "voice_sim_audio"  # ctx.resources: (SimMicrophone, SimSpeaker) once set up
+# Where the simulated speaker writes WAV files (optional)
+SIM_OUT_DIR_KEY: ResourceKey[str | Path] = ResourceKey("voice_sim_out_dir")
+# The simulated microphone and speaker, once set up
+SIM_AUDIO_KEY: ResourceKey[tuple[SimMicrophone, SimSpeaker]] = ResourceKey("voice_sim_audio", tuple)
 
 
 @dataclass
@@ -207,7 +215,7 @@ class VoiceNode(Node):
         """Simulation: render ``msg`` with the robot's TTS and speak it into the sim mic."""
         speech = self.models.speech
         pcm = await self.clock.offload(speech.synthesize, msg.data)
-        self._mic.inject(resample(pcm, speech.sample_rate, SAMPLE_RATE))
+        self._mic.inject(resample(pcm, speech.sample_rate, SAMPLE_RATE_HZ))
 
     def _visitor_audio(self, msg: AudioChunk) -> None:
         """Simulation: recorded audio (e.g. a WAV file or a browser upload) into the sim mic."""
@@ -215,7 +223,7 @@ class VoiceNode(Node):
             self.log.warning("bad visitor audio", sample_rate=msg.sample_rate, size=len(msg.pcm))
             return
         pcm = np.frombuffer(msg.pcm, dtype="<i2").astype(np.int16)
-        self._mic.inject(resample(pcm, msg.sample_rate, SAMPLE_RATE))
+        self._mic.inject(resample(pcm, msg.sample_rate, SAMPLE_RATE_HZ))
 
     async def teardown(self) -> None:
         for dev in (self._mic, self._speaker, self._xvf):

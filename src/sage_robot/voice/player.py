@@ -17,12 +17,13 @@ from typing import Any
 
 import numpy as np
 
+from sage_robot.core.audio import SAMPLE_RATE_HZ
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import Clock
 from sage_robot.core.msgs.voice import AudioChunk
 from sage_robot.core.topics import AUDIO_OUT
 from sage_robot.hardware.audio import Speaker
-from sage_robot.voice.audio_io import SAMPLE_RATE, resample
+from sage_robot.voice.audio_io import resample
 from sage_robot.voice.tts import Speech, mouth_envelope
 from sage_robot.voice.wake import WakeDetector
 
@@ -86,7 +87,7 @@ class Mouth:
             self.speaking = True
             try:
                 if self.reference is not None:  # a detector scores best after some silence
-                    silence = np.zeros(round(REFERENCE_PRIME_S * SAMPLE_RATE), dtype=np.int16)
+                    silence = np.zeros(round(REFERENCE_PRIME_S * SAMPLE_RATE_HZ), dtype=np.int16)
                     await self.clock.offload(self.reference.feed, silence)
                 while (item := await queue.get()) is not None:
                     pcm, rate = item
@@ -171,7 +172,7 @@ class Mouth:
 
     def _hear_self(self, block: np.ndarray, rate: int, start: float) -> None:
         assert self.reference is not None
-        self.reference.feed(resample(block, rate, SAMPLE_RATE))
+        self.reference.feed(resample(block, rate, SAMPLE_RATE_HZ))
         if max(self.reference.last_scores.values(), default=0.0) >= SELF_WAKE_THRESHOLD:
             self.last_self_wake = start + len(block) / rate
 

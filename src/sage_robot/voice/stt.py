@@ -19,8 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from sage_robot.core.audio import SAMPLE_RATE_HZ
 from sage_robot.core.errors import ConfigError
-from sage_robot.voice.audio_io import SAMPLE_RATE, AudioError, to_float
+from sage_robot.voice.audio_io import AudioError, to_float
 
 NO_SPEECH_MAX = 0.6  # segments more likely silence than this are dropped
 AVG_LOGPROB_MIN = -1.0  # segments the model is this unsure of are dropped
@@ -118,7 +119,7 @@ class SpeechToText:
         """One transcription at load, so the first visitor does not pay for the first call
         (allocations; on CUDA, kernel setup)."""
         rng = np.random.default_rng(WARMUP_SEED)
-        audio = (rng.normal(0.0, WARMUP_RMS, round(WARMUP_S * SAMPLE_RATE))).astype(np.float32)
+        audio = (rng.normal(0.0, WARMUP_RMS, round(WARMUP_S * SAMPLE_RATE_HZ))).astype(np.float32)
         with self._lock:
             segments, _info = self._model.transcribe(audio, language="en", beam_size=BEAM_SIZE,
                                                      without_timestamps=True)  # fmt: skip
@@ -131,7 +132,7 @@ class SpeechToText:
         pcm16k = np.asarray(pcm16k)
         if pcm16k.ndim != 1:
             raise AudioError(f"expected mono audio (1-D samples), got shape {pcm16k.shape}")
-        duration = len(pcm16k) / SAMPLE_RATE
+        duration = len(pcm16k) / SAMPLE_RATE_HZ
         t0 = time.perf_counter()
         with self._lock:
             if duration == 0 or (not speech_checked and self._speech_s(pcm16k) < MIN_SPEECH_S):

@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from sage_robot.core.audio import FRAME_S, SAMPLE_RATE_HZ
 from sage_robot.core.errors import ConfigError
-from sage_robot.voice.audio_io import FRAME_S, SAMPLE_RATE, to_float
+from sage_robot.voice.audio_io import to_float
 
 WINDOW_SAMPLES = 512  # 32 ms at 16 kHz: Silero's window
 CONTEXT_SAMPLES = 64  # samples of the previous window the model sees
@@ -89,7 +90,7 @@ class SileroVad:
         self.reset()
         probs = self.probabilities(pcm)
         self.reset()
-        return sum(p >= threshold for p in probs) * WINDOW_SAMPLES / SAMPLE_RATE
+        return sum(p >= threshold for p in probs) * WINDOW_SAMPLES / SAMPLE_RATE_HZ
 
 
 class EndReason(str, enum.Enum):

@@ -30,12 +30,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from sage_robot.core.audio import FRAME_S, FRAME_SAMPLES, SAMPLE_RATE_HZ
 from sage_robot.core.errors import ConfigError
-from sage_robot.voice.audio_io import FRAME_S, FRAME_SAMPLES, Framer, to_int16
+from sage_robot.voice.audio_io import Framer, to_int16
 from sage_robot.voice.denoise import NoiseSuppressor
 from sage_robot.voice.wake_head import HEAD_FRAMES, WakeHead, load_head
 
-WARMUP_SAMPLES = 16000 * 4  # 4 s: openWakeWord's feature history at start-up
+WARMUP_SAMPLES = SAMPLE_RATE_HZ * 4  # 4 s: openWakeWord's feature history at start-up
 WARMUP_SEED = 1234  # seeds the start-up history so every run scores the same
 WARMUP_AMPLITUDE = 1000  # int16 peak of that start-up noise (openWakeWord's value)
 DEFAULT_REFRACTORY_S = 2.0

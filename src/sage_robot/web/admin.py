@@ -34,7 +34,6 @@ PLACES_CHANGED = "places_changed"  # Event kind published after the waypoints fi
 
 _log = get_logger("web")
 _places_lock = asyncio.Lock()
-KB_SERVICE = "kb_service"  # ctx.resources key of the KB node's service (sage_robot.kb.node)
 
 
 @router.get("/api/admin/logs")
@@ -157,6 +156,7 @@ def mount_kb(app: FastAPI, st: WebState) -> None:
     """
     try:
         from sage_robot.kb.api import make_router
+        from sage_robot.kb.node import KB_SERVICE
     except ImportError as exc:
         st.extras["kb_missing"] = f"the knowledge base is not installed ({exc.name or exc})"
         return
@@ -176,6 +176,8 @@ def kb_status(st: WebState) -> str:
     """Empty when the KB answers; else why not, for a person."""
     if st.extras.get("kb_missing"):
         return str(st.extras["kb_missing"])
+    from sage_robot.kb.node import KB_SERVICE  # installed: kb_missing is not set
+
     if st.node.ctx.resources.get(KB_SERVICE) is None:
         return "the knowledge base node is not running (add \"kb\" to the profile's nodes)"
     return ""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import math
 from typing import Any
 
@@ -51,10 +52,11 @@ def _pose(body: dict[str, Any]) -> Pose2D:
 
 @router.get("/api/health")
 async def health(request: Request) -> dict[str, Any]:
-    """Nodes and their state (errors only for the operator)."""
+    """Nodes and their state (errors only for the operator), as the launcher last published
+    them on ``/sage/health``."""
     st = state_of(request)
-    launcher = st.node.ctx.resources.get("launcher")
-    nodes = launcher.health_report() if launcher is not None else {}
+    report = st.node.bus.latest(topics.HEALTH)
+    nodes = {h.name: dataclasses.asdict(h) for h in report.nodes} if report is not None else {}
     if not is_operator(request):
         nodes = {n: {k: v for k, v in h.items() if k != "last_error"} for n, h in nodes.items()}
     return {

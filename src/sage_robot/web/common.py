@@ -22,7 +22,7 @@ MAX_FINITE_FLOAT = sys.float_info.max  # JSON integers beyond this cannot become
 class WebState:
     """What the request handlers share."""
 
-    node: Any  # the WebNode (bus, clock, settings, launcher resources)
+    node: Any  # the WebNode (bus, clock, settings, ctx.resources)
     hub: Any
     teleop: Any
     sessions: Sessions

@@ -3,7 +3,7 @@
 uvicorn's ``Server.serve()`` runs as a task of the node, so handlers publish on the bus
 directly with no thread hop. The listening socket is bound in ``setup`` (a busy port
 fails the start with a message that names it); ``web.port`` 0 picks a free port, which
-is then in :attr:`WebNode.port` and ``ctx.resources["web_url"]``.
+is then in :attr:`WebNode.port` and ``ctx.resources[WEB_URL]``.
 """
 
 from __future__ import annotations
@@ -21,10 +21,11 @@ import uvicorn
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.log import RECENT
 from sage_robot.core.node import Node
+from sage_robot.core.resources import ResourceKey
 
 WS_MAX_MESSAGE_BYTES = 64 * 1024  # larger WebSocket messages close the socket (1009)
 SHUTDOWN_GRACE_S = 1  # open connections get this long to finish on stop (s)
-WEB_URL = "web_url"  # ctx.resources key: the server's base URL
+WEB_URL = ResourceKey("web_url", str)  # the server's base URL, once it listens
 
 
 class WebNode(Node):

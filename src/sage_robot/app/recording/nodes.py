@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -12,11 +13,13 @@ from sage_robot.app.recording.mcap_io import McapRecorder, _ros_name, read_mcap
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.msgs import OccupancyGrid
 from sage_robot.core.node import Node
+from sage_robot.core.resources import ResourceKey
 
-RECORD_PATH = "record_path"  # ctx.resources key: where the recorder writes
-RECORD_TOPICS = "record_topics"  # ctx.resources key: topics to record (default: the profile's)
-REPLAY_PATH = "replay_path"  # ctx.resources key: what the replay node plays
-REPLAY_SPEED = "replay_speed"
+RECORD_PATH: ResourceKey[str | Path] = ResourceKey("record_path", doc="where the recorder writes")
+RECORD_TOPICS: ResourceKey[Sequence[str]] = ResourceKey("record_topics")  # default: the profile's
+REPLAY_PATH: ResourceKey[str | Path] = ResourceKey("replay_path", doc="what the replay node plays")
+REPLAY_SPEED = ResourceKey("replay_speed", float)  # default 1
+FOXGLOVE_PORT = ResourceKey("foxglove_port", int)  # where the Foxglove gate listens
 
 
 class RecorderNode(Node):
@@ -25,8 +28,9 @@ class RecorderNode(Node):
     async def setup(self) -> None:
         path = self.ctx.resources.get(RECORD_PATH)
         if not path:
-            raise ValueError("recorder: no output file (ctx.resources['record_path'])")
-        self.topics = set(self.ctx.resources.get(RECORD_TOPICS) or self.settings.ops.record_topics)
+            raise ValueError("recorder: no output file (ctx.resources[RECORD_PATH])")
+        wanted = self.ctx.resources.get(RECORD_TOPICS)
+        self.topics = set(wanted or self.settings.ops.record_topics)
         self.recorder = McapRecorder(path)
         self.errors = 0
         self._remove_tap = self.bus.add_tap(self._tap)
@@ -59,7 +63,7 @@ class ReplayNode(Node):
     name = "replay"
 
     async def setup(self) -> None:
-        self.path = Path(self.ctx.resources[REPLAY_PATH])
+        self.path = Path(self.ctx.resources.require(REPLAY_PATH))
         self.speed = float(self.ctx.resources.get(REPLAY_SPEED, 1.0))
         self.published = 0
         self.messages = await asyncio.to_thread(lambda: list(read_mcap(self.path)))
@@ -112,7 +116,7 @@ class FoxgloveNode(Node):
                 f"Foxglove: cannot listen on {ops.foxglove_host}:{ops.foxglove_port} ({exc.strerror}); "
                 "stop the other program or set ops.foxglove_port"
             ) from None
-        self.ctx.resources["foxglove_port"] = self.port
+        self.ctx.resources[FOXGLOVE_PORT] = self.port
         self._channels: dict[str, tuple[Any, Any]] = {}
         self._last_map = -1e9
         self.sent = 0

@@ -120,61 +120,115 @@ def to_dict(msg: Any) -> dict[str, Any]:
 
 
 def _decode(tp: Any, value: Any) -> Any:
-    origin = typing.get_origin(tp)
+    """``value`` (as :func:`_encode` wrote it) as the field type ``tp``."""
     if tp is Any:
         return value
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        for arg in args:
-            if arg is type(None):
-                continue
-            try:
-                return _decode(arg, value)
-            except (TypeError, ValueError, KeyError):
-                continue
-        raise ValueError(f"{value!r} matches none of {tp}")
-    if tp is np.ndarray:
-        if not isinstance(value, dict) or "__ndarray__" not in value:
-            raise ValueError("expected an encoded array")
-        arr = np.array(_nonfinite_from_json(value["__ndarray__"]), dtype=value["dtype"])
-        return arr.reshape(value["shape"])
-    if tp is bytes:
-        if not isinstance(value, dict) or "__bytes__" not in value:
-            raise ValueError("expected encoded bytes")
-        return base64.b64decode(value["__bytes__"])
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_decode(args[0], v) for v in value)
-        return tuple(_decode(a, v) for a, v in zip(args, value, strict=True))
-    if origin is dict:
-        _, vt = typing.get_args(tp)
-        return {k: _decode(vt, v) for k, v in value.items()}
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        return tp(value)
-    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
-        return _from_fields(tp, value)
-    if tp is float:
-        if value is None:
-            return float("nan")
-        if not isinstance(value, (int, float)) or isinstance(value, bool):
-            raise TypeError(f"expected a number, got {value!r}")
-        return float(value)
-    if tp is int:
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise TypeError(f"expected an integer, got {value!r}")
-        return value
-    if tp is str:
-        if not isinstance(value, str):
-            raise TypeError(f"expected a string, got {value!r}")
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise TypeError(f"expected true/false, got {value!r}")
-        return value
+    generic = _GENERIC_DECODERS.get(typing.get_origin(tp))
+    if generic is not None:
+        return generic(tp, value)
+    if isinstance(tp, type):
+        return _decode_class(tp, value)
     return value
+
+
+def _decode_class(tp: type, value: Any) -> Any:
+    exact = _TYPE_DECODERS.get(tp)
+    if exact is not None:
+        return exact(value)
+    if issubclass(tp, enum.Enum):
+        return tp(value)
+    if dataclasses.is_dataclass(tp):
+        return _from_fields(tp, value)
+    return value
+
+
+# ---- generic types: by their origin (``int | None`` → UnionType, ``tuple[int, ...]`` → tuple)
+
+
+def _decode_union(tp: Any, value: Any) -> Any:
+    args = typing.get_args(tp)
+    if value is None and type(None) in args:
+        return None
+    for arg in args:
+        if arg is type(None):
+            continue
+        try:
+            return _decode(arg, value)
+        except (TypeError, ValueError, KeyError):
+            continue
+    raise ValueError(f"{value!r} matches none of {tp}")
+
+
+def _decode_tuple(tp: Any, value: Any) -> tuple[Any, ...]:
+    args = typing.get_args(tp)
+    if len(args) == 2 and args[1] is Ellipsis:
+        return tuple(_decode(args[0], v) for v in value)
+    return tuple(_decode(a, v) for a, v in zip(args, value, strict=True))
+
+
+def _decode_dict(tp: Any, value: Any) -> dict[Any, Any]:
+    _, vt = typing.get_args(tp)
+    return {k: _decode(vt, v) for k, v in value.items()}
+
+
+_GENERIC_DECODERS: dict[Any, Callable[[Any, Any], Any]] = {
+    typing.Union: _decode_union,
+    types.UnionType: _decode_union,
+    tuple: _decode_tuple,
+    dict: _decode_dict,
+}
+
+
+# ---- plain types, by the type itself
+
+
+def _decode_array(value: Any) -> np.ndarray:
+    if not isinstance(value, dict) or "__ndarray__" not in value:
+        raise ValueError("expected an encoded array")
+    arr = np.array(_nonfinite_from_json(value["__ndarray__"]), dtype=value["dtype"])
+    return arr.reshape(value["shape"])
+
+
+def _decode_bytes(value: Any) -> bytes:
+    if not isinstance(value, dict) or "__bytes__" not in value:
+        raise ValueError("expected encoded bytes")
+    return base64.b64decode(value["__bytes__"])
+
+
+def _decode_float(value: Any) -> float:
+    if value is None:  # NaN was written as null
+        return float("nan")
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        raise TypeError(f"expected a number, got {value!r}")
+    return float(value)
+
+
+def _decode_int(value: Any) -> int:
+    if not isinstance(value, int) or isinstance(value, bool):
+        raise TypeError(f"expected an integer, got {value!r}")
+    return value
+
+
+def _decode_str(value: Any) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"expected a string, got {value!r}")
+    return value
+
+
+def _decode_bool(value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise TypeError(f"expected true/false, got {value!r}")
+    return value
+
+
+_TYPE_DECODERS: dict[type, Callable[[Any], Any]] = {
+    np.ndarray: _decode_array,
+    bytes: _decode_bytes,
+    float: _decode_float,
+    int: _decode_int,
+    str: _decode_str,
+    bool: _decode_bool,
+}
 
 
 def _from_fields(cls: type, data: Any) -> Any:

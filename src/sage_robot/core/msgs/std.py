@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import field
 from enum import Enum
+from typing import Any
 
 import numpy as np
 
@@ -171,6 +172,29 @@ class DiagnosticStatus:
 class DiagnosticArray:
     stamp: float
     status: tuple[DiagnosticStatus, ...] = ()
+
+
+@message("foxglove/Json")
+class NodeHealth:
+    """One node as the launcher knows it: state, restarts, last error, its own stats and the
+    rates (Hz) of the topics it published over the last diagnostics period."""
+
+    name: str
+    state: str  # a NodeState value: created, starting, running, backoff, stopped, failed
+    restarts: int = 0
+    last_error: str = ""
+    started_at: float | None = None
+    critical: bool = False
+    stats: dict[str, Any] = field(default_factory=dict)
+    topics: dict[str, float] = field(default_factory=dict)
+
+
+@message("foxglove/Json")
+class HealthReport:
+    """Every node's health (latched on ``/sage/health``; the web's ``/api/health`` shows it)."""
+
+    stamp: float
+    nodes: tuple[NodeHealth, ...] = ()
 
 
 @message("std_msgs/msg/String")

@@ -22,7 +22,7 @@
 - Run by the supervisor (:mod:`sage_robot.app.supervisor`, ``sage up``'s default), it
   writes a heartbeat byte every ``HEARTBEAT_PERIOD_S`` to the pipe the supervisor gave it;
   when the heartbeat stops (frozen process, stalled loop) the supervisor stops the motors.
-- The port is ``ctx.resources["mcu_port"]`` when a simulator put one there, else
+- The port is ``ctx.resources[PORT_RESOURCE]`` when a simulator put one there, else
   ``mcu.port`` ('auto' finds /dev/ttyACM*). Losing it (USB unplug) logs one line,
   publishes an ERROR DiagnosticStatus on ``/mcu/status`` while down and reopens every
   ``mcu.reconnect_s`` until it is back.
@@ -50,6 +50,7 @@ from sage_robot.core.msgs import (
     Twist,
 )
 from sage_robot.core.node import Node
+from sage_robot.core.resources import ResourceKey
 from sage_robot.hardware.mcu import protocol as proto
 from sage_robot.hardware.mcu.alignment import AlignmentWatch
 from sage_robot.hardware.mcu.convert import (
@@ -62,7 +63,7 @@ from sage_robot.hardware.mcu.convert import (
 from sage_robot.hardware.mcu.dialects import BannerWatch, dialect
 from sage_robot.hardware.mcu.port import HEARTBEAT_PERIOD_S, find_port, heartbeat_fd, open_port
 
-PORT_RESOURCE = "mcu_port"  # ctx.resources key: a port path set by the simulator
+PORT_RESOURCE = ResourceKey("mcu_port", str)  # a port path set by the simulator (or a bench)
 CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
 TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
 LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)

@@ -7,13 +7,14 @@ import threading
 from typing import Any
 
 from sage_robot.core import topics
+from sage_robot.core.bus import Topic
 from sage_robot.core.errors import DeviceNotConnectedError
 from sage_robot.core.msgs import DiagnosticStatus, Level
 from sage_robot.core.node import Node
 from sage_robot.hardware.rplidar.driver import RplidarDriver, revolution_to_scan
 from sage_robot.hardware.rplidar.protocol import ProtocolError
 
-LIDAR_STATUS = "/lidar/status"
+LIDAR_STATUS = Topic("/lidar/status", DiagnosticStatus)  # connected or not, and why
 
 
 class LidarNode(Node):

@@ -7,7 +7,7 @@
 - offers ``/slam/save`` (:class:`SaveMapRequest` → :class:`SaveMapReply`).
 
 Matching and map building run in a worker thread so the event loop never stalls. The laser
-mount comes from the profile (``robot.lidar``). Map files go to ``ctx.resources["slam_out_dir"]``
+mount comes from the profile (``robot.lidar``). Map files go to ``ctx.resources[OUT_DIR_RESOURCE]``
 when set, else ``slam.out_dir``, else ``<state dir>/maps``. The engine's thresholds come from
 the profile's ``slam`` section (:func:`slam_config`).
 """
@@ -25,10 +25,12 @@ from typing import Any
 import numpy as np
 
 from sage_robot.core import topics
+from sage_robot.core.bus import Topic
 from sage_robot.core.config.areas import SlamSettings
 from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D
 from sage_robot.core.node import Node
 from sage_robot.core.paths import state_dir
+from sage_robot.core.resources import ResourceKey
 from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgress
 from sage_robot.nav.slam.occupancy import OccupancyMapper
@@ -36,12 +38,13 @@ from sage_robot.nav.slam.points import Pose, Scan
 from sage_robot.nav.slam.store import save_session
 
 ODOM_HISTORY = 50  # odometry messages kept to interpolate at scan times (1 s at 50 Hz)
-SLAM_PROGRESS = "/slam/progress"
-SLAM_SAVE = "/slam/save"
-OUT_DIR_RESOURCE = "slam_out_dir"  # ctx.resources key: where /slam/save writes by default
-INITIAL_POSE_RESOURCE = "slam_initial_pose"  # ctx.resources key: (x, y, theta) of the first scan
-AUTOSAVE_RESOURCE = "slam_autosave"  # ctx.resources key: map name to save under when the node stops
-SAVED_RESOURCE = "slam_saved"  # ctx.resources key set by the autosave: the paths written
+SLAM_PROGRESS = Topic("/slam/progress", SlamProgress)  # latched
+SLAM_SAVE = "/slam/save"  # service: SaveMapRequest -> SaveMapReply
+OUT_DIR_RESOURCE: ResourceKey[str | Path] = ResourceKey("slam_out_dir")  # where /slam/save writes by default
+# (x, y, theta) of the first scan
+INITIAL_POSE_RESOURCE: ResourceKey[tuple[float, float, float]] = ResourceKey("slam_initial_pose", tuple)
+AUTOSAVE_RESOURCE = ResourceKey("slam_autosave", str)  # map name to save under when the node stops
+SAVED_RESOURCE: ResourceKey[dict[str, str]] = ResourceKey("slam_saved", dict)  # the autosave's paths
 
 
 class SlamNode(Node):
@@ -52,7 +55,7 @@ class SlamNode(Node):
         self.laser = (lidar.x_m, lidar.y_m, lidar.yaw_rad)
         initial = self.ctx.resources.get(INITIAL_POSE_RESOURCE, (0.0, 0.0, 0.0))
         self.config = self.settings.slam
-        self.slam = Slam(slam_config(self.config), initial_pose=tuple(initial))  # type: ignore[arg-type]
+        self.slam = Slam(slam_config(self.config), initial_pose=initial)
         self.mapper = OccupancyMapper(self.config.resolution_m, self.slam.config.max_range_m)
         self._mapped_keyframes = 0
         self._map_version = 0
@@ -61,7 +64,7 @@ class SlamNode(Node):
         self._odom: Odometry | None = None
         self.scans = 0
         self.bus.declare(topics.MAP, OccupancyGrid, latched=True)
-        self.bus.declare(SLAM_PROGRESS, SlamProgress, latched=True)  # the web page asks for the last
+        self.bus.declare(SLAM_PROGRESS, latched=True)  # the web page asks for the last
         self._odom_history: deque[tuple[float, Pose]] = deque(maxlen=ODOM_HISTORY)
         self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=ODOM_HISTORY)
         self._scan_sub = self.subscribe(topics.SCAN, LaserScan, maxsize=1)
@@ -76,7 +79,7 @@ class SlamNode(Node):
             return
         try:
             async with self._lock:
-                paths = await asyncio.to_thread(self._save, self.out_dir(), name)
+                paths = await self.clock.offload(self._save, self.out_dir(), name)
             self.ctx.resources[SAVED_RESOURCE] = paths
             self.log.info("map saved on exit", **paths)
         except Exception as exc:  # teardown must not raise
@@ -93,7 +96,7 @@ class SlamNode(Node):
             odom = odom_at(list(self._odom_history), msg.stamp)
             scan = Scan(np.asarray(msg.ranges), msg.angles, msg.range_min, msg.range_max, self.laser)
             async with self._lock:
-                result = await asyncio.to_thread(self._process, msg.stamp, odom, scan)
+                result = await self.clock.offload(self._process, msg.stamp, odom, scan)
             self.scans += 1
             x, y, th = result.pose
             self.bus.publish(
@@ -134,13 +137,13 @@ class SlamNode(Node):
             return
         self._map_dirty = False
         async with self._lock:  # the scan thread updates the grid in place
-            grid = await asyncio.to_thread(self.mapper.to_grid, self.clock.now())
+            grid = await self.clock.offload(self.mapper.to_grid, self.clock.now())
         self.bus.publish(topics.MAP, grid)
 
     async def _on_save(self, req: SaveMapRequest) -> SaveMapReply:
         out = Path(req.directory) if req.directory else self.out_dir()
         async with self._lock:
-            paths = await asyncio.to_thread(self._save, out, req.name)
+            paths = await self.clock.offload(self._save, out, req.name)
         self.log.info("map saved", **paths)
         return SaveMapReply(paths["yaml"], paths["pgm"], paths["graph"], paths["trajectory"])
 
@@ -149,7 +152,8 @@ class SlamNode(Node):
         return save_session(self.slam, out, name, self.mapper.to_grid(self.clock.now()))
 
     def out_dir(self) -> Path:
-        return Path(self.ctx.resources.get(OUT_DIR_RESOURCE) or self.config.out_dir or state_dir() / "maps")
+        out = self.ctx.resources.get(OUT_DIR_RESOURCE)
+        return Path(out or self.config.out_dir or state_dir() / "maps")
 
     def stats(self) -> dict[str, Any]:
         return {
