@@ -4,7 +4,13 @@ Runs the simulator's world node (people, lidar, collisions) with the map_server,
 localization and navigator nodes on the simulated clock, and sends ``navigate_to`` goals:
 every ordered pair of places (an Eulerian circuit, so each leg starts where the last
 ended) or N random legs. Reports success rate, collisions, failures with reasons,
-time and path length against the shortest plan, and localization RMSE against truth.
+time and path length against the shortest plan, time spent waiting for people, how often
+the robot asked them to step aside, and localization RMSE against truth.
+
+Any map works: ``--places auto N`` chooses N well-separated places the robot can reach
+(``nav_places``) when the map has no waypoints file, and the ``--clutter`` boxes are placed
+only where a path the robot fits through remains between all places (``boxes_placed``,
+``paths_remain`` in the result).
 
 Wheel odometry here is derived from the simulated body with a scale error
 (``ODOM_SCALE_ERROR``): the pseudo-terminal MCU link runs in wall time and cannot keep pace
@@ -18,16 +24,22 @@ import asyncio
 import itertools
 import json
 import math
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 ODOM_SCALE_ERROR = 0.01  # wheel odometry reads 1 % long
 CLUTTER_HEIGHT_M = 1.0  # unmapped boxes as tall as this (the lidar sees them)
-CLUTTER_SIZE_M = (0.6, 0.4)
-CLUTTER_CLEARANCE_M = 1.2  # clutter stays this far from walls and places
+ARRIVED_M = 1.0  # a leg succeeds when the navigator says so and the robot truly stands this close
+# to the goal (the navigator may settle a little short of a spot people stand on)
+PLACES_STREAM = 1  # --places auto draws from the generator seeded (seed, this): legs keep theirs
+# Events in which the robot asks people to step aside ("excuse me"): the navigator's
+# blocked_by_people (its message is "excuse me, may I pass?"), or any kind that says so.
+EXCUSE_ME_KINDS = frozenset({"blocked_by_people", "excuse_me"})
 LEG_TIMEOUT_S = 300.0  # simulated seconds per leg before it counts as failed
 SAMPLE_PERIOD_S = 0.2  # localization error sampling (simulated s)
 NEAR_PERSON_M = 5.0  # a failed leg lists the simulated people this close to the robot
@@ -37,6 +49,9 @@ PEOPLE_WAIT_S = 60.0  # the simulator's visitors who walk up to the robot stay 3
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", default="", help="map YAML (default: the shipped building)")
     p.add_argument("--waypoints", default="", help="waypoints YAML, own/Nav2 (default: beside the map)")
+    p.add_argument("--places", nargs=2, default=None, metavar=("auto", "N"),
+                   help="'auto N': N well-separated reachable places chosen from the map (seeded; "
+                        "the first is the dock), for maps without a waypoints file")
     p.add_argument("--pedestrians", type=int, default=10, help="simulated people walking about")
     p.add_argument("--clutter", type=int, default=0, help="unmapped boxes the world places")
     p.add_argument("--pairs", default="all", help="'all' ordered pairs of places, or N random legs")
@@ -69,39 +84,72 @@ def _circuit(n: int, start: int) -> list[int]:
     return path[::-1]
 
 
-def _clutter(settings: Any, k: int, rng: np.random.Generator, places: list[Any]) -> tuple[Any, ...]:
-    from scipy import ndimage
-
-    from sage_robot.core.mapio import read_map
+def _clutter(settings: Any, k: int, rng: np.random.Generator,
+             places: list[Any]) -> tuple[tuple[Any, ...], bool]:
+    """``k`` unmapped boxes where a path the robot fits through remains between all places, and
+    whether it does (see ``nav_places.place_boxes``); fewer boxes when no more fit."""
+    from sage_robot.bench.nav_places import BOX_SIZE_M, free_space, place_boxes
     from sage_robot.core.msgs.sim import LowObstacle
     from sage_robot.core.paths import world_map_yaml
+    from sage_robot.nav.mapdata import load_map_data
 
     if k <= 0:
-        return ()
-    grid = read_map(world_map_yaml(settings))
-    clear = ndimage.distance_transform_edt(grid.data == 0) * grid.resolution
-    cells = np.argwhere(clear >= CLUTTER_CLEARANCE_M)
-    boxes: list[LowObstacle] = []
-    while len(boxes) < k and len(cells):
-        r, c = cells[rng.integers(len(cells))]
-        x = grid.origin.x + (c + 0.5) * grid.resolution
-        y = grid.origin.y + (r + 0.5) * grid.resolution
-        if all(math.hypot(p.pose.x - x, p.pose.y - y) > CLUTTER_CLEARANCE_M for p in places):
-            yaw = float(rng.uniform(0, math.pi))
-            boxes.append(LowObstacle(f"box{len(boxes)}", x, y, *CLUTTER_SIZE_M, yaw, CLUTTER_HEIGHT_M, "box"))
-    return tuple(boxes)
+        return (), True
+    data = load_map_data(world_map_yaml(settings), None, settings.nav.keepout_mask, settings.nav.speed_mask)
+    space = free_space(data.grid, data.keepout)
+    boxes, ok = place_boxes(space, k, [(p.pose.x, p.pose.y) for p in places], settings.robot.radius_m, rng)
+    return tuple(LowObstacle(f"box{i}", b.x, b.y, *BOX_SIZE_M, b.yaw, CLUTTER_HEIGHT_M, "box")
+                 for i, b in enumerate(boxes)), ok
 
 
-def _settings(args: argparse.Namespace) -> Any:
+def _auto_places(args: argparse.Namespace, folder: str) -> str:
+    """A waypoints file in ``folder`` with ``--places auto N`` places for ``--map``: reachable
+    from the dock (the first) by the planner too, not only by the free-space flood fill."""
+    from sage_robot.bench.nav_places import auto_places, free_space, write_waypoints
+    from sage_robot.core.config import Settings
+    from sage_robot.core.errors import ConfigError
+    from sage_robot.nav.mapdata import load_for
+    from sage_robot.nav.planner import NoPath, plan
+
+    mode, count = args.places
+    try:
+        n = int(count)
+    except ValueError:
+        n = -1
+    if mode != "auto" or n < 2:
+        raise ConfigError(f"--places must be 'auto N' with N >= 2, got {mode!r} {count!r}")
+    settings = Settings.model_validate({"nav": {"map": args.map}})
+    data = load_for(settings)
+    nav, radius = settings.nav, settings.robot.radius_m
+    static = data.costmap(radius, nav.inflation_radius_m, nav.cost_scaling_factor)
+    dock: list[tuple[float, float]] = []
+
+    def plannable(x: float, y: float) -> bool:
+        if not dock:
+            dock.append((x, y))
+            return True
+        try:
+            plan(static, dock[0], (x, y))
+        except NoPath:
+            return False
+        return True
+
+    points = auto_places(free_space(data.grid, data.keepout), n, radius,
+                         np.random.default_rng((args.seed, PLACES_STREAM)), plannable)
+    return str(write_waypoints(Path(folder) / "waypoints.yaml", points, str(data.path)))
+
+
+def _settings(args: argparse.Namespace, waypoints: str = "") -> Any:
     from sage_robot.core.config import Settings
     from sage_robot.nav.mapdata import load_for
 
-    base = {"map": args.map, "waypoints": args.waypoints}
+    base = {"map": args.map, "waypoints": waypoints or args.waypoints}
     places = load_for(Settings.model_validate({"nav": base})).places
     if len(places) < 2:
         from sage_robot.core.errors import ConfigError
 
-        raise ConfigError("the nav benchmark needs a waypoints file with two or more places")
+        raise ConfigError("the nav benchmark needs a waypoints file with two or more places, "
+                          "or --places auto N to choose them from the map")
     start = "DOCKING_STATION" if "DOCKING_STATION" in places else places.names()[0]
     return Settings.model_validate({
         "nav": {**base, "initial_place": start, "people_wait_s": args.people_wait},
@@ -111,11 +159,16 @@ def _settings(args: argparse.Namespace) -> Any:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    from sage_robot.core.errors import ConfigError
-
     if args.merge:
         return _merge(args.merge)
-    settings, places = _settings(args)
+    with tempfile.TemporaryDirectory(prefix="sage-bench-nav-") as folder:
+        return _run(args, _auto_places(args, folder) if getattr(args, "places", None) else "")
+
+
+def _run(args: argparse.Namespace, waypoints: str) -> dict[str, Any]:
+    from sage_robot.core.errors import ConfigError
+
+    settings, places = _settings(args, waypoints)
     names = [p.name for p in places]
     rng = np.random.default_rng(args.seed)
     start = names.index(settings.nav.initial_place)
@@ -133,10 +186,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if not 1 <= args.first_leg <= len(legs):
         raise ConfigError(f"--first-leg must be between 1 and {len(legs)}, got {args.first_leg}")
     legs = legs[args.first_leg - 1:]
-    clutter = _clutter(settings, args.clutter, rng, places)
+    clutter, paths_remain = _clutter(settings, args.clutter, rng, places)
     head = {"bench": "nav", "map": settings.nav.map or "default building", "pedestrians": args.pedestrians,
             "clutter": args.clutter, "seed": args.seed, "speed": None if args.fast else args.speed,
             "first_leg": args.first_leg}
+    if waypoints:
+        head["places"] = f"auto {len(places)}"
+    extra = {"boxes_placed": len(clutter), "paths_remain": paths_remain}
     done: list[dict[str, Any]] = _read_legs(args.legs_file, head, legs) if args.legs_file else []
     todo = legs[len(done):]
     if args.max_legs > 0:
@@ -153,7 +209,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         done += asyncio.run(_drive_all(settings, todo, clutter, keep))
     wall_s = round(time.perf_counter() - t0, 1)
-    return {**head, "legs_planned": len(legs), **summarize(done), "wall_s": wall_s}
+    return {**head, **extra, "legs_planned": len(legs), **summarize(done), "wall_s": wall_s}
 
 
 def _merge(paths: list[str]) -> dict[str, Any]:
@@ -272,6 +328,8 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
                 errs_deg.append(math.degrees(abs(wrap_angle(est[2] - world.theta))))
 
     sampler = asyncio.get_running_loop().create_task(sample())
+    waiting = _WaitWatch(clock)
+    untap = bus.add_tap(waiting.see)
     hits: list[Any] = []  # the simulator's Collision records (what, where, how fast)
     world.on_collision.append(hits.append)
     await clock.sleep(1.0)
@@ -279,6 +337,7 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
     for a, b in legs:
         goal = nav.data.places.get(b).pose
         c0, d0, t0 = world.collisions, world.distance_m, clock.now()
+        waiting.reset()
         errs_m.clear()
         errs_deg.clear()
         hits.clear()
@@ -289,13 +348,18 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
         handle = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place=b))
         try:
             res = await clock.wait_for(handle.result(), LEG_TIMEOUT_S)
-            ok, why = res.ok, res.message
+            ok, why = res.ok, res.message or str(getattr(res.value, "reason", "") or "")
         except asyncio.TimeoutError:
             await handle.cancel()
             ok, why = False, f"timed out after {LEG_TIMEOUT_S:g} s"
+        short_m = math.hypot(goal.x - world.x, goal.y - world.y)
+        if ok and short_m > ARRIVED_M:  # the simulator's truth, not the navigator's word
+            ok, why = False, f"the navigator reported arrival {short_m:.1f} m from the goal ({why or 'no note'})"
         rec = {"from": a, "to": b, "ok": ok, "reason": "" if ok else why,
                "collisions": world.collisions - c0, "time_s": round(clock.now() - t0, 1),
                "length_m": round(world.distance_m - d0, 2), "shortest_m": round(shortest, 2),
+               "short_m": round(short_m, 2), "waited_s": round(waiting.waited(), 1),
+               "excuse_me": waiting.excuse_me,
                "loc_samples": len(errs_m), "loc_sq_m": round(float(np.sum(np.square(errs_m))), 6),
                "loc_sq_deg": round(float(np.sum(np.square(errs_deg))), 4),
                "hits": [{"kind": h.kind, "name": h.name, "x": round(h.x, 2), "y": round(h.y, 2),
@@ -309,7 +373,41 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
         records.append(rec)
         keep(rec)
     sampler.cancel()
+    untap()
     return records
+
+
+class _WaitWatch:
+    """Sees every publication (a bus tap): the time the navigator spends in
+    ``waiting_for_people`` (its NAV_STATE) and the events that ask people to step aside."""
+
+    def __init__(self, clock: Any) -> None:
+        self.clock = clock
+        self.since: float | None = None  # simulated time the current wait began
+        self.total = 0.0
+        self.excuse_me = 0
+
+    def reset(self) -> None:
+        self.total, self.excuse_me = 0.0, 0
+        if self.since is not None:
+            self.since = self.clock.now()
+
+    def waited(self) -> float:
+        return self.total + (self.clock.now() - self.since if self.since is not None else 0.0)
+
+    def see(self, name: str, msg: Any) -> None:
+        from sage_robot.core import topics
+        from sage_robot.core.msgs.nav import NavState
+
+        if name == topics.NAV_STATE:
+            if msg.state is NavState.WAITING_FOR_PEOPLE:
+                if self.since is None:
+                    self.since = self.clock.now()
+            elif self.since is not None:
+                self.total += self.clock.now() - self.since
+                self.since = None
+        elif name == topics.EVENTS and (msg.kind in EXCUSE_ME_KINDS or "excuse me" in msg.message.lower()):
+            self.excuse_me += 1
 
 
 def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
@@ -333,6 +431,8 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
         "localization_rmse_deg": round(math.sqrt(sum(r["loc_sq_deg"] for r in records) / n_loc), 2)
         if n_loc else None,
         "sim_time_s": round(sum(r["time_s"] for r in records), 1),
+        "time_waiting_s": round(sum(r.get("waited_s", 0.0) for r in records), 1),
+        "excuse_me": int(sum(r.get("excuse_me", 0) for r in records)),
     }
 
 

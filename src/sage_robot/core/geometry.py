@@ -56,7 +56,8 @@ def transform_points(pose: tuple[float, float, float], pts: np.ndarray) -> np.nd
     x, y, t = pose
     c, s = math.cos(t), math.sin(t)
     rot = np.array([[c, -s], [s, c]])
-    return pts @ rot.T + np.array([x, y])
+    out: np.ndarray = pts @ rot.T + np.array([x, y])
+    return out
 
 
 def yaw_to_quaternion(yaw: float) -> tuple[float, float, float, float]:

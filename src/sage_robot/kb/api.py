@@ -141,7 +141,7 @@ def _service_getter(service: ServiceSource) -> Callable[[], KbService]:
         found = service() if callable(service) and not isinstance(service, KbService) else service
         if found is None:
             raise HTTPException(503, "the knowledge base is starting; try again in a moment")
-        return found  # type: ignore[return-value]
+        return found
 
     return svc
 

@@ -53,7 +53,8 @@ def erf(x: np.ndarray) -> np.ndarray:
     np.exp(a, out=a)
     poly *= a  # poly * exp(-x^2)
     np.subtract(1.0, poly, out=poly)
-    return np.copysign(poly, x, out=poly)
+    out: np.ndarray = np.copysign(poly, x, out=poly)
+    return out
 
 
 def gelu(x: np.ndarray) -> np.ndarray:
@@ -68,12 +69,14 @@ def gelu(x: np.ndarray) -> np.ndarray:
 def layer_norm(x: np.ndarray, weight: np.ndarray, bias: np.ndarray, eps: float) -> np.ndarray:
     mean = x.mean(axis=-1, keepdims=True)
     var = ((x - mean) ** 2).mean(axis=-1, keepdims=True)
-    return (x - mean) / np.sqrt(var + np.float32(eps)) * weight + bias
+    out: np.ndarray = (x - mean) / np.sqrt(var + np.float32(eps)) * weight + bias
+    return out
 
 
 def softmax(x: np.ndarray) -> np.ndarray:
     e = np.exp(x - x.max(axis=-1, keepdims=True))
-    return e / e.sum(axis=-1, keepdims=True)
+    out: np.ndarray = e / e.sum(axis=-1, keepdims=True)
+    return out
 
 
 class BertEncoder:
@@ -145,8 +148,10 @@ class BertEncoder:
 def mean_pool(hidden: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Mean of token vectors where ``mask`` is 1: (batch, tokens, h) -> (batch, h)."""
     m = mask[..., None].astype(np.float32)
-    return (hidden * m).sum(axis=1) / np.clip(m.sum(axis=1), 1e-9, None)
+    out: np.ndarray = (hidden * m).sum(axis=1) / np.clip(m.sum(axis=1), 1e-9, None)
+    return out
 
 
 def l2_normalize(x: np.ndarray) -> np.ndarray:
-    return x / np.clip(np.linalg.norm(x, axis=-1, keepdims=True), 1e-12, None)
+    out: np.ndarray = x / np.clip(np.linalg.norm(x, axis=-1, keepdims=True), 1e-12, None)
+    return out

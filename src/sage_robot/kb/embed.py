@@ -41,7 +41,8 @@ class Embedder(ABC):
         """(len(texts), dim) float32, each row L2-normalised. Thread-safe."""
 
     def embed_one(self, text: str) -> np.ndarray:
-        return self.embed([text])[0]
+        row: np.ndarray = self.embed([text])[0]
+        return row
 
 
 class MiniLmEmbedder(Embedder):

@@ -95,7 +95,7 @@ def sample_odometry(particles: np.ndarray, prev: tuple[float, float, float],
     rot1_h = rot1 - rng.normal(0, math.sqrt(a1 * r1n**2 + a2 * trans**2), n)
     trans_h = trans - rng.normal(0, math.sqrt(a3 * trans**2 + a4 * (r1n**2 + r2n**2)), n)
     rot2_h = rot2 - rng.normal(0, math.sqrt(a1 * r2n**2 + a2 * trans**2), n)
-    out = particles.copy()
+    out: np.ndarray = particles.copy()
     heading = particles[:, 2] + rot1_h
     out[:, 0] += trans_h * np.cos(heading)
     out[:, 1] += trans_h * np.sin(heading)

@@ -276,4 +276,5 @@ def equal_share_weights(particles: np.ndarray) -> np.ndarray:
     count = np.bincount(lab, minlength=k + 1)
     w = np.full(n, 1.0 / n)
     w[~lone] = (1.0 - lone.sum() / n) / k / count[lab[~lone]]
-    return w / w.sum()
+    weights: np.ndarray = w / w.sum()
+    return weights

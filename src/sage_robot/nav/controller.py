@@ -81,7 +81,8 @@ class PurePursuit:
         rest = self.path[self._i:]
         d = np.hypot(rest[:, 0] - x, rest[:, 1] - y)
         beyond = np.flatnonzero(d >= lookahead)
-        return rest[beyond[0]] if len(beyond) else rest[-1]
+        carrot: np.ndarray = rest[beyond[0]] if len(beyond) else rest[-1]
+        return carrot
 
     def step(self, pose: tuple[float, float, float], costmap: Costmap | None = None) -> Command:
         """One control step at ``pose`` (map frame)."""

@@ -9,8 +9,12 @@ Conventions
   centre here means touching), 254 lethal, 255 unknown.
 - Inflation (Nav2 ``InflationLayer``): at distance ``d`` from the nearest lethal cell,
   ``d <= inscribed``: 253; ``d <= inflation_radius``: ``252 * exp(-k (d - inscribed))``.
-  Obstacles seen by the scan (not in the map) count ``OBSTACLE_PAD_M`` nearer; scan hits
-  within ``WALL_SNAP_M`` of a mapped wall are that wall and count only ``WALL_PAD_M`` nearer.
+  Obstacles seen by the scan (not in the map) are padded, as people's legs need
+  (:func:`person_sized`): a small blob (legs, a person) counts ``OBSTACLE_PAD_M`` nearer,
+  as a wall; any larger blob (a box, a cart, a wall the map lacks) and scan hits within
+  ``WALL_SNAP_M`` of a mapped wall get a *soft* pad: the padded band costs (a little below
+  inscribed) but stays passable, so only cells within the inscribed radius of what the robot
+  really sees are impassable and no pad ever closes a gap the robot fits through.
 """
 
 from __future__ import annotations
@@ -42,6 +46,13 @@ OBSTACLE_PAD_M = 0.2
 # there (dock -> cafe: blocked 4 times in 4); 0.1 m still boxed in at a junction.
 WALL_SNAP_M = 0.1
 WALL_PAD_M = 0.15  # walls get a thinner pad than legs, and still a margin for the pose error
+# Scan blobs at most this big (bounding box side, m; marks within BLOB_JOIN_M joined) are
+# people or their legs (two 0.07 m legs 0.22 m apart striding 0.14 m; a 0.5 m body's arc) and
+# get the hard pad. Larger blobs get the soft pad: the band counts as SOFT_PAD_CLEAR_M beyond
+# the inscribed radius (cost ~ 240, passable), never as inscribed.
+PERSON_BLOB_M = 0.55
+BLOB_JOIN_M = 0.2
+SOFT_PAD_CLEAR_M = 0.02
 
 
 @dataclass(frozen=True)
@@ -57,7 +68,7 @@ class GridGeometry:
     def of(cls, grid: OccupancyGrid) -> GridGeometry:
         if abs(grid.origin.theta) > 1e-6:
             raise ValueError("costmaps need a map whose origin yaw is 0")
-        return cls(grid.origin.x, grid.origin.y, grid.resolution, grid.data.shape)  # type: ignore[arg-type]
+        return cls(grid.origin.x, grid.origin.y, grid.resolution, grid.data.shape)
 
     def to_cell(self, x: np.ndarray | float, y: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """World (m) → (row, col) int arrays; may fall outside the grid."""
@@ -82,12 +93,42 @@ def inflate(lethal: np.ndarray, resolution: float, inscribed_m: float, inflation
         dist = ndimage.distance_transform_edt(~lethal).astype(np.float32) * resolution
     else:
         dist = np.full(lethal.shape, np.inf, dtype=np.float32)
+    return costs_from_distance(dist, lethal, inscribed_m, inflation_m, cost_scaling), dist
+
+
+def costs_from_distance(dist: np.ndarray, lethal: np.ndarray, inscribed_m: float, inflation_m: float,
+                        cost_scaling: float) -> np.ndarray:
+    """Nav2's inflation costs (uint8) of a distance field (m) to the ``lethal`` cells."""
     cost = np.zeros(lethal.shape, dtype=np.uint8)
     ring = (dist > inscribed_m) & (dist <= inflation_m)
     cost[ring] = (MAX_NON_OBSTACLE * np.exp(-cost_scaling * (dist[ring] - inscribed_m))).astype(np.uint8)
     cost[(dist <= inscribed_m) & ~lethal] = INSCRIBED
     cost[lethal] = LETHAL
-    return cost, dist
+    return cost
+
+
+def person_sized(marks: np.ndarray, resolution: float, walls: np.ndarray | None = None) -> np.ndarray:
+    """The marks that belong to free-standing blobs no bigger than a person (``PERSON_BLOB_M``),
+    marks within ``BLOB_JOIN_M`` of each other joined (a person's two legs are one blob). A blob
+    that joins one of ``walls`` (the map's walls, scan hits on them) is part of that wall (a
+    box or a cabinet against it), never a person."""
+    if not marks.any():
+        return np.zeros(marks.shape, dtype=bool)
+    join = max(1, round(BLOB_JOIN_M / resolution / 2))
+    disk = np.hypot(*np.mgrid[-join:join + 1, -join:join + 1]) <= join
+    every = marks if walls is None else marks | walls
+    labels, n = ndimage.label(ndimage.binary_dilation(every, structure=disk), structure=np.ones((3, 3)))
+    small = np.zeros(n + 1, dtype=bool)
+    for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+        if sl is None:
+            continue
+        side = max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) - 2 * join
+        small[i] = side * resolution <= PERSON_BLOB_M
+    if walls is not None:
+        small[np.unique(labels[walls])] = False
+        small[0] = False
+    out: np.ndarray = small[labels] & marks
+    return out
 
 
 def resample_mask(mask: OccupancyGrid, geom: GridGeometry, fill: int = -1) -> np.ndarray:
@@ -244,12 +285,18 @@ class Costmap:
         r0, r1 = max(rr.min() - margin, 0), min(rr.max() + margin + 1, self.geom.shape[0])
         c0, c1 = max(cc.min() - margin, 0), min(cc.max() + margin + 1, self.geom.shape[1])
         lethal, wall = self.obstacles[r0:r1, c0:c1], self.wall_zone[r0:r1, c0:c1]
-        for marks, pad in ((lethal & ~wall, OBSTACLE_PAD_M), (lethal & wall, WALL_PAD_M)):
+        people = person_sized(lethal & ~wall, self.geom.resolution,
+                              self.static[r0:r1, c0:c1] | (lethal & wall))
+        layers = ((people, OBSTACLE_PAD_M, True), (lethal & ~wall & ~people, OBSTACLE_PAD_M, False),
+                  (lethal & wall, WALL_PAD_M, False))
+        for marks, pad, hard in layers:
             if not marks.any():
                 continue
-            cost, dist = inflate(marks, self.geom.resolution, self.inscribed_m + pad,
-                                 self.inflation_m + pad, self.cost_scaling)
-            dist = np.maximum(dist - pad, 0.0)
+            raw = ndimage.distance_transform_edt(~marks).astype(np.float32) * self.geom.resolution
+            dist = np.maximum(raw - pad, 0.0)
+            if not hard:  # the pad costs, but never makes a cell the robot fits in impassable
+                dist = np.maximum(dist, np.minimum(raw, self.inscribed_m + SOFT_PAD_CLEAR_M))
+            cost = costs_from_distance(dist, marks, self.inscribed_m, self.inflation_m, self.cost_scaling)
             self.cost[r0:r1, c0:c1] = np.maximum(self.cost[r0:r1, c0:c1], cost)
             self.dist[r0:r1, c0:c1] = np.minimum(self.dist[r0:r1, c0:c1], dist)
 

@@ -64,7 +64,8 @@ class LikelihoodField:
         g = self.geom
         col = np.clip(((x - g.origin_x) / g.resolution).astype(np.int64) + 1, 0, self._cols - 1)
         row = np.clip(((y - g.origin_y) / g.resolution).astype(np.int64) + 1, 0, self._rows - 1)
-        return row * self._width + col
+        flat: np.ndarray = row * self._width + col
+        return flat
 
     def distances(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Distances at world points; outside the map counts as far from everything."""
@@ -91,4 +92,5 @@ def beam_log_likelihood(field: LikelihoodField, poses: np.ndarray, sensor: tuple
     ex = ox.astype(np.float32)[:, None] + np.outer(ct, bx) - np.outer(stt, by)
     ey = oy.astype(np.float32)[:, None] + np.outer(stt, bx) + np.outer(ct, by)
     table = field.log_p_table(range_max, sigma)
-    return table[field.flat_index(ex, ey)].sum(axis=1, dtype=np.float64)
+    log_w: np.ndarray = table[field.flat_index(ex, ey)].sum(axis=1, dtype=np.float64)
+    return log_w

@@ -43,7 +43,8 @@ def _astar_backend() -> object | None:
         import pyastar2d  # type: ignore[import-not-found, unused-ignore]
     except ImportError:
         return None
-    return pyastar2d
+    backend: object = pyastar2d
+    return backend
 
 
 def _pool_max(cost: np.ndarray, f: int) -> np.ndarray:
@@ -53,7 +54,7 @@ def _pool_max(cost: np.ndarray, f: int) -> np.ndarray:
     rows, cols = cost.shape
     pr, pc = -rows % f, -cols % f
     padded = np.pad(cost, ((0, pr), (0, pc)), constant_values=255)
-    out = padded[0::f, 0::f].copy()
+    out: np.ndarray = padded[0::f, 0::f].copy()
     for i in range(f):  # strided slices: far faster than a reshaped max over two axes
         for j in range(f):
             if i or j:
@@ -62,7 +63,7 @@ def _pool_max(cost: np.ndarray, f: int) -> np.ndarray:
 
 
 def weights_from_cost(cost: np.ndarray) -> np.ndarray:
-    w = 1.0 + COST_WEIGHT * np.minimum(cost, MAX_NON_OBSTACLE).astype(np.float32) / MAX_NON_OBSTACLE
+    w: np.ndarray = 1.0 + COST_WEIGHT * np.minimum(cost, MAX_NON_OBSTACLE).astype(np.float32) / MAX_NON_OBSTACLE
     w[cost >= INSCRIBED] = np.inf
     return w.astype(np.float32)
 

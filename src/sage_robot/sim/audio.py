@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import io
 import wave
 from collections import deque
@@ -35,7 +36,8 @@ def _resample_to_mic(pcm: np.ndarray, rate: int) -> np.ndarray:
     from scipy.signal import resample_poly
 
     g = gcd(rate, SAMPLE_RATE_HZ)
-    return resample_poly(pcm.astype(np.float32), SAMPLE_RATE_HZ // g, rate // g).astype(np.float32)
+    out: np.ndarray = resample_poly(pcm.astype(np.float32), SAMPLE_RATE_HZ // g, rate // g).astype(np.float32)
+    return out
 
 
 class SimMicrophone:
@@ -53,16 +55,24 @@ class SimMicrophone:
         self.frames = 0
         self.closed = False
         self.waiting = False  # True while read() waits for its frame's time
+        # Set while the clock may step on: read() waits for its frame's time, or the mic is closed.
+        self._clock_free = asyncio.Event()
         self.frame_time: float | None = None  # clock time the last frame read ends
         self.skipped = 0  # silent frames skipped because the reader fell behind
 
-    async def lockstep(self, dt: float = 0.0, poll_s: float = 0.0005) -> None:
+    async def lockstep(self, dt: float = 0.0) -> None:
         """A SimClock ``on_step`` hook: hold the clock until the reader asked for its next
-        frame, so simulated time never runs ahead of a slow consumer (tests, benchmarks)."""
-        import asyncio
+        frame, so simulated time never runs ahead of a slow consumer (tests, benchmarks).
+        Before the first read there is no reader to wait for."""
+        if self._t0 is not None:
+            await self._clock_free.wait()
 
-        while not self.waiting and not self.closed and self._t0 is not None:
-            await asyncio.sleep(poll_s)
+    def _set_waiting(self, waiting: bool) -> None:
+        self.waiting = waiting
+        if waiting or self.closed:
+            self._clock_free.set()
+        else:
+            self._clock_free.clear()
 
     def inject(self, pcm16k: np.ndarray) -> float:
         """Queue a visitor's audio (16 kHz int16); returns its length in seconds."""
@@ -115,11 +125,11 @@ class SimMicrophone:
         self._skip_silence_when_behind()
         self.frames += 1
         if self.paced:
-            self.waiting = True
+            self._set_waiting(True)
             try:
                 await self.clock.sleep_until(self._t0 + self.frames * FRAME_S)
             finally:
-                self.waiting = False
+                self._set_waiting(False)
         x = self._rng.normal(0.0, self.noise_rms, FRAME_SAMPLES).astype(np.float32)
         x += self._take_voice(FRAME_SAMPLES)
         k = min(FRAME_SAMPLES, len(self._echo))
@@ -133,7 +143,8 @@ class SimMicrophone:
         """A reader slower than simulated time (``sage sim --fast``) skips ahead over frames
         with nothing in them but the noise floor, as a real mic's full buffer drops audio;
         a visitor's words and the robot's echo are never skipped."""
-        assert self._t0 is not None and self._echo_t is not None
+        assert self._t0 is not None  # read() sets both before it comes here
+        assert self._echo_t is not None
         behind = self.clock.now() - (self._t0 + self.frames * FRAME_S)
         if behind > MAX_LAG_S and not self._voice and len(self._echo) == 0:
             skip = int(behind / FRAME_S) - 1  # the next frame stays due now, not later
@@ -143,6 +154,7 @@ class SimMicrophone:
 
     def close(self) -> None:
         self.closed = True
+        self._clock_free.set()
 
 
 class SimSpeaker:

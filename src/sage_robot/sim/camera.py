@@ -141,7 +141,8 @@ class Camera:
 
     def _z_of_rows(self, depth: np.ndarray) -> np.ndarray:
         """Height (m) above the floor seen at each pixel for objects at per-column ``depth``."""
-        return HEIGHT_M + (self.h / 2 - self.rows) * depth[None, :] / self.f
+        z: np.ndarray = HEIGHT_M + (self.h / 2 - self.rows) * depth[None, :] / self.f
+        return z
 
     def _boxes(
         self, img: np.ndarray, zbuf: np.ndarray, cx: float, cy: float, angles: np.ndarray, scene: Scene

@@ -179,7 +179,8 @@ class GridRaycaster:
         flat = (np.clip(iy, -PAD, self.height + PAD - 1) + PAD) * self._pad_w + (
             np.clip(ix, -PAD, self.width + PAD - 1) + PAD
         )
-        return self._codes[flat.astype(np.intp)]
+        codes: np.ndarray = self._codes[flat.astype(np.intp)]
+        return codes
 
     def _sample(
         self, gx0: float, gy0: float, dx: np.ndarray, dy: np.ndarray, t0: np.ndarray, tmax: float
@@ -247,7 +248,8 @@ def ray_circles(x: float, y: float, angles: np.ndarray, circles: np.ndarray) -> 
         t = b - np.sqrt(disc)
     t = np.where(c <= 0.0, 0.0, t)  # inside
     valid = (disc >= 0.0) & ((t >= 0.0) | (c <= 0.0))
-    return np.where(valid, t, np.inf).min(axis=1)
+    dist: np.ndarray = np.where(valid, t, np.inf).min(axis=1)
+    return dist
 
 
 def ray_boxes(x: float, y: float, angles: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -145,52 +145,15 @@ def _event(entry: Any, where: str) -> TimedEvent:
 
 
 def parse_scenario(data: Any, source: str, base: Path | None = None) -> Scenario:
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a scenario is a YAML mapping")
-    unknown = set(data) - SCENARIO_KEYS
-    if unknown:
-        raise ConfigError(
-            f"{source}: unknown key(s) {', '.join(sorted(unknown))}; allowed: "
-            f"{', '.join(sorted(SCENARIO_KEYS))}"
-        )
-
-    def path(key: str) -> str:
-        value = str(data.get(key) or "")
-        if value and base is not None and not Path(value).is_absolute():
-            value = str((base / value).resolve())
-        return value
-
-    def number(key: str, kind: type) -> Any:
-        value = data.get(key)
-        if value is None:
-            return None
-        try:
-            return kind(value)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{source}: {key} must be a {kind.__name__}, got {value!r}") from None
-
-    people = data.get("people") or []
-    if not isinstance(people, list):
-        raise ConfigError(f"{source}: people must be a list")
-    clutter = data.get("clutter") or []
-    events = data.get("events") or []
-    if not isinstance(clutter, list) or not isinstance(events, list):
-        raise ConfigError(f"{source}: clutter and events must be lists")
-    battery = number("battery", float)
-    if battery is not None and not 0.0 <= battery <= 1.0:
-        raise ConfigError(f"{source}: battery is a charge fraction 0..1, got {battery}")
-    pedestrians = number("pedestrians", int)
-    if pedestrians is not None and pedestrians < 0:
-        raise ConfigError(f"{source}: pedestrians must be >= 0")
-    duration = number("duration_s", float)
-    if duration is not None and duration <= 0:
-        raise ConfigError(f"{source}: duration_s must be > 0")
+    _check_keys(data, source)
+    people, clutter, events = _lists(data, source)
+    battery, pedestrians, duration = _checked_numbers(data, source)
     return Scenario(
         name=str(data.get("name") or Path(source).stem),
-        map=path("map"),
-        waypoints=path("waypoints"),
+        map=_path(data, "map", base),
+        waypoints=_path(data, "waypoints", base),
         start=data.get("start"),
-        seed=number("seed", int),
+        seed=_number(data, "seed", int, source),
         duration_s=duration,
         pedestrians=pedestrians,
         people=tuple(people),
@@ -202,6 +165,61 @@ def parse_scenario(data: Any, source: str, base: Path | None = None) -> Scenario
         ),
         description=str(data.get("description", "")),
     )
+
+
+def _check_keys(data: Any, source: str) -> None:
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: a scenario is a YAML mapping")
+    unknown = set(data) - SCENARIO_KEYS
+    if unknown:
+        raise ConfigError(
+            f"{source}: unknown key(s) {', '.join(sorted(unknown))}; allowed: "
+            f"{', '.join(sorted(SCENARIO_KEYS))}"
+        )
+
+
+def _lists(data: dict[str, Any], source: str) -> tuple[list[Any], list[Any], list[Any]]:
+    """(people, clutter, events): each a list, empty when left out."""
+    people = data.get("people") or []
+    if not isinstance(people, list):
+        raise ConfigError(f"{source}: people must be a list")
+    clutter = data.get("clutter") or []
+    events = data.get("events") or []
+    if not isinstance(clutter, list) or not isinstance(events, list):
+        raise ConfigError(f"{source}: clutter and events must be lists")
+    return people, clutter, events
+
+
+def _checked_numbers(data: dict[str, Any], source: str) -> tuple[float | None, int | None, float | None]:
+    """(battery, pedestrians, duration_s), each None when left out, checked for range."""
+    battery = _number(data, "battery", float, source)
+    if battery is not None and not 0.0 <= battery <= 1.0:
+        raise ConfigError(f"{source}: battery is a charge fraction 0..1, got {battery}")
+    pedestrians = _number(data, "pedestrians", int, source)
+    if pedestrians is not None and pedestrians < 0:
+        raise ConfigError(f"{source}: pedestrians must be >= 0")
+    duration = _number(data, "duration_s", float, source)
+    if duration is not None and duration <= 0:
+        raise ConfigError(f"{source}: duration_s must be > 0")
+    return battery, pedestrians, duration
+
+
+def _path(data: dict[str, Any], key: str, base: Path | None) -> str:
+    """A file name, made absolute from ``base`` (the scenario's folder) when relative."""
+    value = str(data.get(key) or "")
+    if value and base is not None and not Path(value).is_absolute():
+        value = str((base / value).resolve())
+    return value
+
+
+def _number(data: dict[str, Any], key: str, kind: type, source: str) -> Any:
+    value = data.get(key)
+    if value is None:
+        return None
+    try:
+        return kind(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{source}: {key} must be a {kind.__name__}, got {value!r}") from None
 
 
 BUNDLED_DIR = Path(__file__).with_name("scenarios")  # example scenarios shipped with the package

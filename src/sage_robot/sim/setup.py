@@ -11,12 +11,13 @@ import yaml
 
 from sage_robot.core.config import Settings
 from sage_robot.core.errors import ConfigError
-from sage_robot.core.mapio import FREE, read_map
+from sage_robot.core.mapio import FREE, read_map, world_to_cell
+from sage_robot.core.msgs import OccupancyGrid
 from sage_robot.core.msgs.sim import LowObstacle
 from sage_robot.core.paths import waypoints_yaml, world_map_yaml
 from sage_robot.core.places import Places, load_places
 from sage_robot.sim.lidar import LidarSpec
-from sage_robot.sim.people import PERSON_RADIUS_M, Lanes
+from sage_robot.sim.people import PERSON_RADIUS_M, WALL_MARGIN_M, Lanes
 from sage_robot.sim.raycast import GridRaycaster
 from sage_robot.sim.scenario import Scenario, low_obstacle
 from sage_robot.sim.spawn import people_from_specs, spawn_crowd
@@ -66,6 +67,21 @@ def pose_resolver(places: Places) -> Any:
     return resolve
 
 
+def _walkable_from(grid: OccupancyGrid, raycaster: GridRaycaster, start: tuple[float, float, float]) -> np.ndarray:
+    """Known-free cells a person fits on that connect to the start (the robot's part of the
+    building: not the specks and closed-off rooms of a SLAM map); every such cell when the
+    start itself is not on one."""
+    from scipy import ndimage
+
+    ok = (grid.data == FREE) & (raycaster.edt_cells * raycaster.res >= PERSON_RADIUS_M + WALL_MARGIN_M)
+    labels, _ = ndimage.label(ok)
+    r, c = world_to_cell(grid, start[0], start[1])
+    row, col = int(r), int(c)
+    inside = 0 <= row < grid.height and 0 <= col < grid.width
+    label = int(labels[row, col]) if inside else 0
+    return np.asarray(labels == label) if label else np.asarray(ok)
+
+
 def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
     """The world the profile (and scenario) describe. Errors name the file and the problem."""
     map_path = world_map_yaml(settings)
@@ -95,7 +111,8 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
     people = people_from_specs(list(scenario.people) if scenario else [], 0, resolve)
     rng = np.random.default_rng(np.random.SeedSequence(sim.seed).spawn(SPAWN_STREAM + 1)[SPAWN_STREAM])
     free_cells = np.flatnonzero(
-        (grid.data.ravel() == FREE) & (raycaster.edt_cells.ravel() * raycaster.res >= FREE_SPOT_CLEARANCE_M)
+        _walkable_from(grid, raycaster, start).ravel()
+        & (raycaster.edt_cells.ravel() * raycaster.res >= FREE_SPOT_CLEARANCE_M)
     )
 
     def sample_free(g: np.random.Generator) -> tuple[float, float]:

@@ -242,4 +242,5 @@ def _box_distance(x: float, y: float, boxes: np.ndarray) -> np.ndarray:
     dx, dy = x - boxes[:, 0], y - boxes[:, 1]
     lx, ly = np.abs(c * dx + s * dy), np.abs(-s * dx + c * dy)
     ex, ey = np.maximum(lx - boxes[:, 2] / 2, 0.0), np.maximum(ly - boxes[:, 3] / 2, 0.0)
-    return np.hypot(ex, ey)
+    dist: np.ndarray = np.hypot(ex, ey)
+    return dist

@@ -73,7 +73,8 @@ def _mono(pcm: np.ndarray, channels: int, channel: int | None) -> np.ndarray:
         if not 0 <= channel < channels:
             raise AudioError(f"channel {channel} does not exist; the audio has {channels}")
         return np.ascontiguousarray(frames[:, channel])
-    return frames.astype(np.int32).mean(axis=1).astype(np.int16)
+    mono: np.ndarray = frames.astype(np.int32).mean(axis=1).astype(np.int16)
+    return mono
 
 
 def read_wav(path: str | Path | IO[bytes], channel: int | None = None) -> tuple[np.ndarray, int]:

@@ -95,4 +95,5 @@ class NoiseSuppressor:
                 if self.min_subwindows > 1 else [self._sub_min]  # fmt: skip
             self._sub_min = np.full_like(power, np.inf)
             self._sub_hops = 0
-        return self.noise_bias * np.minimum.reduce([*self._mins, self._sub_min])
+        noise: np.ndarray = self.noise_bias * np.minimum.reduce([*self._mins, self._sub_min])
+        return noise

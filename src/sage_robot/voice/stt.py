@@ -113,7 +113,8 @@ class SpeechToText:
 
         if self._vad is None:
             self._vad = SileroVad()
-        return self._vad.speech_seconds(pcm, VAD_THRESHOLD)
+        seconds: float = self._vad.speech_seconds(pcm, VAD_THRESHOLD)
+        return seconds
 
     def warm_up(self) -> None:
         """One transcription at load, so the first visitor does not pay for the first call

@@ -161,9 +161,10 @@ def mouth_envelope(pcm: np.ndarray, rate: int, block_s: float = VISEME_BLOCK_S) 
     padded[: len(x)] = x
     rms = np.sqrt(np.mean(np.square(padded.reshape(blocks, n)), axis=1)) + 1e-9
     db = 20 * np.log10(rms)
-    return np.clip((db - VISEME_FLOOR_DBFS) / (VISEME_CEIL_DBFS - VISEME_FLOOR_DBFS), 0, 1).astype(
-        np.float32
-    )
+    levels: np.ndarray = np.clip(
+        (db - VISEME_FLOOR_DBFS) / (VISEME_CEIL_DBFS - VISEME_FLOOR_DBFS), 0, 1
+    ).astype(np.float32)
+    return levels
 
 
 _default: Speech | None = None

@@ -128,7 +128,8 @@ def people_points(msg: Any) -> list[list[float]]:
     for f in fields(msg):
         value = getattr(msg, f.name)
         if isinstance(value, np.ndarray) and value.ndim == 2 and value.shape[1] >= 2:
-            return np.round(value[:, :2].astype(float), 2).tolist()
+            rows: list[list[float]] = np.round(value[:, :2].astype(float), 2).tolist()
+            return rows
         if isinstance(value, (tuple, list)) and value:
             pts = [p for p in (xy(v) for v in value) if p is not None]
             if pts:

@@ -81,7 +81,8 @@ ros2.CONVERTERS[_TfWrap] = ("tf2_msgs/TFMessage", lambda w: ros2.odom_tf(w.odom)
 
 
 def _t(stamp: Any) -> float:
-    return stamp.sec + stamp.nanosec / NS
+    t: float = stamp.sec + stamp.nanosec / NS
+    return t
 
 
 def _pose2d(p: Any) -> Pose2D:

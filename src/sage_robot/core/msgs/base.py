@@ -39,7 +39,7 @@ def _field_equal(a: Any, b: Any) -> bool:
 
 def _eq(self: Any, other: Any) -> bool:
     if type(self) is not type(other):
-        return NotImplemented
+        return typing.cast(bool, NotImplemented)  # as in __eq__, which mypy exempts by name
     return all(
         _field_equal(getattr(self, f.name), getattr(other, f.name))
         for f in dataclasses.fields(self)
@@ -52,7 +52,7 @@ def message(ros_type: str = "") -> Callable[[type[M]], type[M]]:
 
     def wrap(cls: type[M]) -> type[M]:
         dc = dataclasses.dataclass(frozen=True, eq=False)(cls)
-        dc.__eq__ = _eq  # type: ignore[method-assign,assignment]
+        dc.__eq__ = _eq  # type: ignore[method-assign]
         dc.__hash__ = None  # type: ignore[assignment]
         name = dc.__name__
         if name in REGISTRY and REGISTRY[name] is not dc:
@@ -114,7 +114,7 @@ def to_dict(msg: Any) -> dict[str, Any]:
     name = type(msg).__name__
     if REGISTRY.get(name) is not type(msg):
         raise TypeError(f"{name} is not a registered message")
-    out = _encode(msg)
+    out: dict[str, Any] = _encode(msg)
     out["type"] = name
     return out
 
@@ -186,7 +186,8 @@ def _decode_array(value: Any) -> np.ndarray:
     if not isinstance(value, dict) or "__ndarray__" not in value:
         raise ValueError("expected an encoded array")
     arr = np.array(_nonfinite_from_json(value["__ndarray__"]), dtype=value["dtype"])
-    return arr.reshape(value["shape"])
+    shaped: np.ndarray = arr.reshape(value["shape"])
+    return shaped
 
 
 def _decode_bytes(value: Any) -> bytes:

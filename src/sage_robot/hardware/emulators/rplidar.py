@@ -28,7 +28,8 @@ def square_room(half_size_m: float = 3.0) -> Callable[[np.ndarray], np.ndarray]:
     def ranges(angles_deg: np.ndarray) -> np.ndarray:
         a = np.radians(angles_deg)
         c, s = np.abs(np.cos(a)), np.abs(np.sin(a))
-        return half_size_m / np.maximum(np.maximum(c, s), 1e-9)
+        dist: np.ndarray = half_size_m / np.maximum(np.maximum(c, s), 1e-9)
+        return dist
 
     return ranges
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import threading
 from typing import Any
 
@@ -26,12 +27,19 @@ class LidarNode(Node):
         self.device = ""
         self.driver: RplidarDriver | None = None
         self._loop = asyncio.get_running_loop()
-        self._thread = self.start_thread(self._rx, "lidar-rx")
+        self._rx_ended = asyncio.Event()  # set (from the thread) when the RX thread ends
+        self._thread = self.start_thread(self._rx_then_signal, "lidar-rx")
         self.spawn(self._watch_thread())
 
     async def _watch_thread(self) -> None:
-        while self._thread.is_alive():
-            await asyncio.sleep(0.5)
+        await self._rx_ended.wait()
+
+    def _rx_then_signal(self) -> None:
+        try:
+            self._rx()
+        finally:
+            with contextlib.suppress(RuntimeError):  # the event loop already closed (shutdown)
+                self._loop.call_soon_threadsafe(self._rx_ended.set)
 
     def _status(self, level: Level, message: str) -> None:
         self.bus.publish_threadsafe(

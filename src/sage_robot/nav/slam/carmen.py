@@ -96,7 +96,7 @@ def open_text(path: Path) -> Iterator[str]:
         raise LogFormatError(f"{path}: is a directory, not a log file") from None
     opener = gzip.open if magic == b"\x1f\x8b" else open
     try:
-        with opener(path, "rt", encoding="latin-1") as f:  # type: ignore[operator]
+        with opener(path, "rt", encoding="latin-1") as f:
             yield from f
     except (OSError, EOFError) as exc:
         raise LogFormatError(f"{path}: cannot read: {exc}") from None

@@ -93,7 +93,8 @@ class PointMap:
     def field(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self._field is None:
             self._build_field()
-        assert self._field is not None and self._coarse is not None
+        assert self._field is not None  # built just above
+        assert self._coarse is not None
         return self._origin, self._field, self._coarse
 
     def _base_cells(self, q: np.ndarray, x: float, y: float, thetas: np.ndarray) -> np.ndarray:
@@ -106,7 +107,8 @@ class PointMap:
         h, w = field.shape
         ix = np.clip(np.floor(px / res).astype(np.int64), 0, w - 1)
         iy = np.clip(np.floor(py / res).astype(np.int64), 0, h - 1)
-        return iy * w + ix
+        cells: np.ndarray = iy * w + ix
+        return cells
 
     def score(self, q: np.ndarray, pose: Pose) -> float:
         """Mean likelihood of the robot-frame points ``q`` at ``pose`` (0..1)."""

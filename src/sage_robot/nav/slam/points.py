@@ -34,7 +34,8 @@ class Scan:
     def hits(self, max_range: float) -> np.ndarray:
         """Mask of the readings that hit something closer than ``max_range`` (m)."""
         r = self.ranges
-        return np.isfinite(r) & (r > self.range_min) & (r < min(self.range_max, max_range))
+        mask: np.ndarray = np.isfinite(r) & (r > self.range_min) & (r < min(self.range_max, max_range))
+        return mask
 
     def points(self, max_range: float) -> np.ndarray:
         """(N, 2) end points of the hits, in the robot frame (m)."""
@@ -64,7 +65,8 @@ def voxel_filter(pts: np.ndarray, size: float) -> np.ndarray:
     uniq, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
     sums = np.zeros((len(uniq), 2))
     np.add.at(sums, inverse, pts)
-    return sums / counts[:, None]
+    centroids: np.ndarray = sums / counts[:, None]
+    return centroids
 
 
 def voxel_indices(pts: np.ndarray, size: float) -> np.ndarray:

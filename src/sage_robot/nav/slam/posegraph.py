@@ -164,4 +164,5 @@ class PoseGraph:
 def _sqrt_info(info: np.ndarray) -> np.ndarray:
     """U with UᵀU = info (for a positive semi-definite info, via eigen-decomposition)."""
     vals, vecs = np.linalg.eigh(0.5 * (info + info.T))
-    return (vecs * np.sqrt(np.maximum(vals, 0.0))).T
+    u: np.ndarray = (vecs * np.sqrt(np.maximum(vals, 0.0))).T
+    return u

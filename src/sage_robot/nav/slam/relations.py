@@ -106,7 +106,7 @@ def relation_error(
     trans = np.empty(len(relations))
     rot = np.empty(len(relations))
     for k, rel in enumerate(relations):
-        est = relative(tuple(poses[i[k]]), tuple(poses[j[k]]))  # type: ignore[arg-type]
+        est = relative(tuple(poses[i[k]]), tuple(poses[j[k]]))
         err = relative((rel.dx, rel.dy, rel.dtheta), est)
         trans[k] = math.hypot(err[0], err[1])
         rot[k] = abs(err[2])

@@ -1,0 +1,114 @@
+"""Narrow gaps (issue #20): the robot passes every gap it fits through, and says truly why
+when it cannot. The boxes are in the simulated world only (not on the robot's map), as the
+benchmark's unmapped boxes; all on the simulated clock."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+import numpy as np
+import pytest
+
+from sage_robot.core import topics
+from sage_robot.core.msgs import OccupancyGrid
+from sage_robot.core.msgs.nav import NavigateGoal
+
+from ..support.grids import WALL, draw
+from .nav_sim import running, settings_for, write_building
+from .test_navigator import GOAL_TOLERANCE_TRUTH_M, REAL_TIMEOUT_S
+
+# A 2 m wide corridor (interior y 0.5..2.5), 11 m long; 0.5 m per character.
+CORRIDOR = """
+########################
+#......................#
+#......................#
+#......................#
+#......................#
+########################
+"""
+START, GOAL = (1.5, 1.5, 0.0), (10.5, 1.5, 0.0)
+RES = 0.05
+BOX_X = (5.8, 6.2)  # the boxes' extent along the corridor (m)
+
+
+def _box(g: OccupancyGrid, x0: float, y0: float, x1: float, y1: float) -> None:
+    """Mark the cells whose centres lie inside the rectangle (exact to the cell)."""
+    c0, c1 = round(x0 / RES), round(x1 / RES)
+    r0, r1 = round(y0 / RES), round(y1 / RES)
+    g.data[r0:r1, c0:c1] = WALL
+
+
+def _free_width(g: OccupancyGrid, x: float) -> float:
+    """The widest run of free cells across the corridor at ``x`` (m)."""
+    col = g.data[:, int(x / RES)] < 50
+    best = run = 0
+    for free in col:
+        run = run + 1 if free else 0
+        best = max(best, run)
+    return best * RES
+
+
+def _worlds(tmp_path, boxes):
+    mapped = draw(CORRIDOR, RES, scale=10)
+    world = OccupancyGrid(mapped.stamp, mapped.frame_id, mapped.resolution, mapped.origin, mapped.data.copy())
+    for b in boxes:
+        _box(world, *b)
+    path = write_building(tmp_path, mapped, {"START": START, "GOAL": GOAL})  # the map has no boxes
+    return world, path
+
+
+async def _drive(world, settings):
+    async with running(settings, world, START) as (bus, _clock, sim):
+        handle = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place="GOAL"))
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        return result, sim
+
+
+@pytest.mark.parametrize("gap_m", [0.7, 0.8, 1.0])
+async def test_passes_a_gap_the_robot_fits_through(tmp_path, gap_m) -> None:
+    mid = 1.5
+    world, path = _worlds(tmp_path, [(*BOX_X[:1], 0.5, BOX_X[1], mid - gap_m / 2),
+                                     (BOX_X[0], mid + gap_m / 2, BOX_X[1], 2.5)])
+    assert _free_width(world, 6.0) == pytest.approx(gap_m)
+    result, sim = await _drive(world, settings_for(path, "START", people_wait_s=5.0))
+    assert result.ok, result.message
+    assert math.hypot(sim.pose[0] - GOAL[0], sim.pose[1] - GOAL[1]) <= GOAL_TOLERANCE_TRUTH_M
+    assert sim.collisions == 0
+    assert not sim.reversed_commands()
+    in_gap = [c.linear_x for _, c, (x, _y, _t) in sim.cmds if BOX_X[0] - 0.1 < x < BOX_X[1] + 0.1]
+    assert in_gap and max(in_gap) < 0.5 * sim.settings.robot.max_linear_mps  # slowly through
+
+
+async def test_passes_a_box_in_a_2m_corridor(tmp_path) -> None:
+    # a 0.6 m box 0.9 m from the lower wall: 0.9 m below it, 0.5 m (too narrow) above it
+    world, path = _worlds(tmp_path, [(5.6, 1.4, 6.2, 2.0)])
+    result, sim = await _drive(world, settings_for(path, "START", people_wait_s=5.0))
+    assert result.ok, result.message
+    assert math.hypot(sim.pose[0] - GOAL[0], sim.pose[1] - GOAL[1]) <= GOAL_TOLERANCE_TRUTH_M
+    assert sim.collisions == 0
+    ys = [y for _, x, y, _ in sim.truth if 5.6 < x < 6.2]
+    assert ys and max(ys) < 1.4  # it took the wide side
+
+
+async def test_closed_corridor_says_an_obstacle_not_people(tmp_path) -> None:
+    world, path = _worlds(tmp_path, [(BOX_X[0], 0.5, BOX_X[1], 2.5)])
+    assert _free_width(world, 6.0) == 0.0
+    result, sim = await _drive(world, settings_for(path, "START", people_wait_s=5.0))
+    assert not result.ok
+    msg = result.message
+    assert "people" not in msg and "person" not in msg, msg
+    assert "obstacle" in msg and "not on the map" in msg, msg
+    assert sim.collisions == 0
+
+
+async def test_passage_closed_on_the_map_says_so(tmp_path) -> None:
+    mapped = draw(CORRIDOR, RES, scale=10)
+    _box(mapped, BOX_X[0], 0.5, BOX_X[1], 2.5)  # a wall on the map itself
+    path = write_building(tmp_path, mapped, {"START": START, "GOAL": GOAL})
+    result, sim = await _drive(mapped, settings_for(path, "START", people_wait_s=5.0))
+    assert not result.ok
+    assert "people" not in result.message, result.message
+    assert "closed" in result.message and "map" in result.message, result.message
+    assert sim.collisions == 0
+    assert np.isfinite(sim.pose[0])
