@@ -60,7 +60,19 @@ python_packages() {
   echo "$want" > "$STAMP"
 }
 
-setup() { system_packages; python_packages; }
+# The browser tests' accessibility checker (axe-core, injected into Chromium by Playwright),
+# pinned, from the npm registry into an ignored folder next to the tests.
+AXE_VERSION=4.10.3
+AXE_DIR="$ROOT/tests/web/.axe"
+node_packages() {
+  local have="$AXE_DIR/node_modules/axe-core/package.json"
+  if [ -f "$have" ] && grep -q "\"version\": \"$AXE_VERSION\"" "$have"; then return 0; fi
+  say "installing axe-core $AXE_VERSION (accessibility checks of the web pages) into $AXE_DIR"
+  mkdir -p "$AXE_DIR"
+  npm install --silent --no-save --no-package-lock --no-audit --no-fund --prefix "$AXE_DIR" "axe-core@$AXE_VERSION"
+}
+
+setup() { system_packages; python_packages; node_packages; }
 
 cmd=${1:-sim}; shift || true
 case "$cmd" in

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import datetime as dt
 import json
+from typing import Any
 
 import pytest
 
@@ -42,7 +43,7 @@ async def respond(brain: LlmBrain, text: str, said: list[str] | None = None):
     return await asyncio.wait_for(brain.respond(text, (said if said is not None else []).append), WAIT_S)
 
 
-def tool_messages(request: dict) -> list[dict]:
+def tool_messages(request: dict[str, Any]) -> list[dict[str, Any]]:
     return [m for m in request["messages"] if m["role"] == "tool"]
 
 

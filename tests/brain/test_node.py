@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import asyncio
 import datetime as dt
+from typing import Any
 
 import pytest
 
 from sage_robot.brain.node import BrainNode
 from sage_robot.brain.scripted import ScriptedServer, Stream, say, text_chunks
 from sage_robot.core import topics
-from sage_robot.core.actions import GoalStatus
+from sage_robot.core.actions import ActionResult, GoalStatus
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.config import Settings
@@ -25,7 +26,7 @@ pytestmark = pytest.mark.filterwarnings("ignore::ResourceWarning")
 OFFLINE = {"nav": {"waypoints": str(package_data("brain", "places.yaml"))}}
 
 
-async def start(bus: Bus, settings: dict | None = None) -> BrainNode:
+async def start(bus: Bus, settings: dict[str, Any] | None = None) -> BrainNode:
     node = BrainNode(NodeContext(bus, bus.clock, Settings.model_validate(settings or OFFLINE)))
     await node.setup()
     return node
@@ -42,7 +43,7 @@ def spoken(bus: Bus) -> list[str]:
     return out
 
 
-async def converse(bus: Bus, text: str) -> tuple[list[str], object]:
+async def converse(bus: Bus, text: str) -> tuple[list[str], ActionResult]:
     handle = await bus.actions.send_goal(topics.CONVERSE, Text(text))
     feedback = [fb.data async for fb in handle.feedback()]
     return feedback, await asyncio.wait_for(handle.result(), WAIT_S)

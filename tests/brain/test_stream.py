@@ -63,7 +63,7 @@ def test_text_and_calls_in_one_stream() -> None:
     st.integers(min_value=1, max_value=40),
     st.dictionaries(st.text(max_size=5), st.text(max_size=20), max_size=4),
 )
-def test_any_fragment_size_gives_the_same_arguments(size: int, args: dict) -> None:
+def test_any_fragment_size_gives_the_same_arguments(size: int, args: dict[str, str]) -> None:
     calls = feed_all(
         tool_call_chunks([("kb_search", args), ("set_goal", ARGS)], "openai", size)
     ).finished_calls()

@@ -1,4 +1,5 @@
 import asyncio
+from typing import Any, cast
 
 from sage_robot.app.launcher import Launcher, NodeSpec
 from sage_robot.core.bus import Bus
@@ -45,7 +46,7 @@ async def test_crashing_node_is_restarted_and_health_shows_it():
     health = launcher.health_report()
     assert health["flaky"]["restarts"] == 2
     assert health["flaky"]["state"] == "running"
-    assert "sensor exploded" in health["flaky"]["last_error"]
+    assert "sensor exploded" in str(health["flaky"]["last_error"])
     assert Flaky.torn_down == 2
     assert stops, "a critical crash must command a stop"
     assert all(t.is_zero for t in stops), "a critical crash must command a stop"
@@ -75,7 +76,7 @@ async def test_health_shows_each_nodes_topic_rates():
     for _ in range(500):  # 5 simulated seconds
         await clock.step(0.01)
     report = launcher.health_report()
-    assert report["heartbeat"]["topics"]["/sage/heartbeat"] == 1.0
+    assert cast(dict[str, Any], report["heartbeat"]["topics"])["/sage/heartbeat"] == 1.0
     assert report["steady"]["topics"] == {}
     await launcher.stop()
 

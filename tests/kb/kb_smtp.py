@@ -8,6 +8,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from email import message_from_bytes
 from email.message import Message
+from typing import Any
 
 from aiosmtpd.controller import Controller
 from aiosmtpd.smtp import AuthResult, LoginPassword
@@ -43,7 +44,7 @@ def free_port() -> int:
 @contextmanager
 def smtp_server(require_auth: bool = False) -> Iterator[tuple[int, Inbox]]:
     inbox, port = Inbox(), free_port()
-    kwargs = {
+    kwargs: dict[str, Any] = {
         "authenticator": _authenticator,
         "auth_require_tls": False,  # loopback only
         "auth_required": True,

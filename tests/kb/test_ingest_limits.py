@@ -12,17 +12,20 @@ import re
 import tracemalloc
 import zipfile
 from collections.abc import Callable, Iterator
+from typing import TypeVar
 
 import pytest
 
 from sage_robot.core.config.areas import KbSettings
 from sage_robot.kb import service as service_module
-from sage_robot.kb.extract import MAX_BLOCK_CHARS, extract
+from sage_robot.kb.extract import MAX_BLOCK_CHARS, READERS, extract
 from sage_robot.kb.guard import MAX_LINE_CHARS, MB, IngestError, IngestLimits, iter_lines
 from sage_robot.kb.service import KbService
 from sage_robot.kb.store.sqlite import SqliteStore
 from tests.kb.kb_docs import DOCX_SECTIONS, MARKDOWN, TEXT, make_docx
 from tests.kb.kb_hostile import make_bomb_docx, make_docx_with, text_with
+
+T = TypeVar("T")
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +40,7 @@ def sqlite_service(tmp_path, embedder) -> Iterator[KbService]:
     svc.close()
 
 
-def peak_bytes(fn: Callable[[], object]) -> tuple[object, int]:
+def peak_bytes(fn: Callable[[], T]) -> tuple[T, int]:
     """``fn()`` and the peak of Python memory allocated while it ran (tracemalloc)."""
     tracemalloc.start()
     try:
@@ -201,7 +204,7 @@ def test_a_parser_crash_is_a_failed_document(sqlite_service, monkeypatch):
     def crash(data, name, limits):
         raise RecursionError("maximum recursion depth exceeded")
 
-    monkeypatch.setitem(service_module.READERS, ".md", crash)
+    monkeypatch.setitem(READERS, ".md", crash)
     result = sqlite_service.ingest_bytes(MARKDOWN, "deep.md")
     assert result.status == "failed"
     assert result.message == "deep.md: could not be read (RecursionError: maximum recursion depth exceeded)"

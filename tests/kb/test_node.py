@@ -24,7 +24,7 @@ def use_test_embedder(monkeypatch, embedder):
     monkeypatch.setattr(service_module, "make_embedder", lambda name: embedder)
 
 
-async def start(tmp_path) -> tuple[KbNode, asyncio.Task]:
+async def start(tmp_path) -> tuple[KbNode, asyncio.Task[None]]:
     settings = load_profile(None, {"kb": {"path": str(tmp_path / "kb.sqlite3")}})
     clock = WallClock()
     node = KbNode(NodeContext(Bus(clock), clock, settings))
@@ -32,7 +32,7 @@ async def start(tmp_path) -> tuple[KbNode, asyncio.Task]:
     return node, asyncio.get_running_loop().create_task(node.run())
 
 
-async def stop(node: KbNode, task: asyncio.Task) -> None:
+async def stop(node: KbNode, task: asyncio.Task[None]) -> None:
     task.cancel()
     await asyncio.gather(task, return_exceptions=True)
     await node.teardown()

@@ -53,8 +53,10 @@ def test_paraphrased_questions_come_first(corpus_services, backend, question, do
 def test_seed_style_answer(corpus_services):
     answer = passages_as_answer("coffee", corpus_services["sqlite"].search("coffee", 2))
     assert answer["query"] == "coffee"
-    assert len(answer["results"]) == 2
-    assert set(answer["results"][0]) == {
+    results = answer["results"]
+    assert isinstance(results, list)
+    assert len(results) == 2
+    assert set(results[0]) == {
         "content",
         "source",
         "title",

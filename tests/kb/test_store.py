@@ -109,8 +109,10 @@ def lexeme_counts(dsn: str) -> tuple[dict[str, int], dict[str, int]]:
     import psycopg
 
     with psycopg.connect(dsn) as conn:
-        kept = dict(conn.execute("SELECT lexeme, df FROM kb_lexemes").fetchall())
-        fresh = dict(conn.execute("SELECT word, ndoc FROM ts_stat('SELECT tsv FROM kb_chunks')").fetchall())
+        kept: dict[str, int] = dict(conn.execute("SELECT lexeme, df FROM kb_lexemes").fetchall())
+        fresh: dict[str, int] = dict(
+            conn.execute("SELECT word, ndoc FROM ts_stat('SELECT tsv FROM kb_chunks')").fetchall()
+        )
     return kept, fresh
 
 

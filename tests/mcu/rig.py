@@ -5,13 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from sage_robot.app.runtime import SIM_STEP_HOOKS, SIM_STEP_S
+from sage_robot.app.runtime import SIM_STEP_S
 from sage_robot.core import topics
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs import BatteryState, DiagnosticStatus, Imu, Odometry, Twist
-from sage_robot.core.node import NodeContext
+from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
 from sage_robot.hardware.mcu.bridge import SerialBridgeNode
 from sage_robot.sim.mcu_pty import McuSimNode
 
@@ -53,7 +53,8 @@ class Rig:
             if self.held is not None and self.clock.now() - self.held_t >= REPEAT_S - 1e-9:
                 self.held_t = self.clock.now()
                 self.ctx.bus.publish(topics.CMD_VEL, self.held)
-            for hook in list(self.ctx.resources[SIM_STEP_HOOKS]):
+            hooks = self.ctx.resources[SIM_STEP_HOOKS]
+            for hook in list(hooks):
                 hook(SIM_STEP_S)
             await self.clock.step(SIM_STEP_S)
 

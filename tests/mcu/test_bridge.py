@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+from typing import Any, cast
 
 import pytest
 
@@ -292,8 +293,8 @@ async def test_sim_profile_wires_mcu_sim_and_serial_bridge():
     report = launcher.health_report()
     assert report["mcu_sim"]["restarts"] == 0
     assert report["serial_bridge"]["restarts"] == 0
-    assert report["serial_bridge"]["stats"]["frames"].get("ODOM", 0) > 0
-    assert proto.ODOM.name in report["mcu_sim"]["stats"]["frames_sent"]
+    assert cast(dict[str, Any], report["serial_bridge"]["stats"])["frames"].get("ODOM", 0) > 0
+    assert proto.ODOM.name in cast(dict[str, Any], report["mcu_sim"]["stats"])["frames_sent"]
     assert PORT_RESOURCE not in ctx.resources  # the simulated MCU cleaned up after itself
 
 

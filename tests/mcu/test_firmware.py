@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,7 +23,7 @@ M_PER_COUNT = math.pi * 0.0814 / 1200  # seed: 0.0814 m dead wheel, 600 CPR x 2
 class Sim:
     """The firmware model on a flat floor; ``cmd`` re-sent every 50 ms while set."""
 
-    def __init__(self, faults: EncoderFaults | None = None, seed: int = 1, **params: float):
+    def __init__(self, faults: EncoderFaults | None = None, seed: int = 1, **params: Any):
         self.fw = FirmwareModel(FirmwareParams(**params), np.random.default_rng(seed), faults)
         self.floor = FlatFloor()
         self.t = 0.0

@@ -13,11 +13,11 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from sage_robot.app.runtime import SIM_STEP_HOOKS, SIM_STEP_S
+from sage_robot.app.runtime import SIM_STEP_S
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.config import load_profile
-from sage_robot.core.node import NodeContext
+from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
 from sage_robot.hardware.mcu import protocol as proto
 from sage_robot.sim.firmware import FirmwareModel, Seed2025Model, Seed2025Params, make_firmware
 from sage_robot.sim.firmware.blockrx import DROPPED_BLOCK, BlockReceiver, encode_seed_command
@@ -267,7 +267,8 @@ class Jetson:
 
     async def run(self, seconds: float) -> None:
         for _ in range(round(seconds / SIM_STEP_S)):
-            for hook in list(self.sim.ctx.resources[SIM_STEP_HOOKS]):
+            hooks = self.sim.ctx.resources[SIM_STEP_HOOKS]
+            for hook in list(hooks):
                 hook(SIM_STEP_S)
             await self.clock.step(SIM_STEP_S)
             self._read()

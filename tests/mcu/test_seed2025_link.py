@@ -139,7 +139,9 @@ async def test_a_byte_lost_inside_a_frame_runs_wild_and_is_stopped(seed: Rig) ->
     seed.bridge._port.write(frame[:5] + frame[6:])  # one payload byte lost on the line
     await seed.run(0.1)
     assert any(abs(w) > 1e3 for _, w in applied), "a wild command was applied (no range check)"
-    await seed.until(lambda: seed.bridge.align.runaways >= 1, 2.0)
+    align = seed.bridge.align
+    assert align is not None  # the seed's dialect is block-aligned
+    await seed.until(lambda: align.runaways >= 1, 2.0)
     await seed.until(lambda: seed.firmware.last_command == (0.0, 0.0), 1.0)  # the stop burst landed
     await seed.run(0.1)
     assert [e.kind for e in events].count("mcu_runaway") == 1

@@ -4,6 +4,7 @@ past circles (people). Map frame, metres, radians."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -15,7 +16,7 @@ RANGE_MIN_M = 0.15
 
 
 def cast(grid: OccupancyGrid, origin: tuple[float, float, float], angles: np.ndarray,
-         people: list[tuple[float, float, float]] = (), range_max: float = RANGE_MAX_M) -> np.ndarray:
+         people: Sequence[tuple[float, float, float]] = (), range_max: float = RANGE_MAX_M) -> np.ndarray:
     """Ranges (m, inf = no return) of beams at ``angles`` (sensor frame) from ``origin``
     (x, y, yaw of the sensor). ``people`` are circles (x, y, radius)."""
     ox, oy, oyaw = origin

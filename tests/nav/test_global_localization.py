@@ -47,7 +47,7 @@ SYMMETRIC = """
 """
 
 
-def _scan(grid, pose):
+def _scan(grid, pose) -> tuple[np.ndarray, np.ndarray, float]:
     ang = beam_angles(180)
     return ang, cast(grid, pose, ang), RANGE_MAX_M
 

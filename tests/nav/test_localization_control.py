@@ -43,7 +43,7 @@ def grid():
     return draw(FLOOR, 0.05, scale=10)  # 0.5 m per character: 15 m x 7 m
 
 
-def _scan(grid, pose):
+def _scan(grid, pose) -> tuple[np.ndarray, np.ndarray]:
     ang = beam_angles(180)
     return ang, cast(grid, pose, ang)
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from sage_robot.core.geometry import wrap_angle
+from sage_robot.core.geometry import wrap_angle, wrap_angles
 from sage_robot.nav.scanmatch import SignedDistanceField, refine
 from sage_robot.sim.raycast import GridRaycaster
 
@@ -52,7 +52,7 @@ def test_people_in_view_are_left_out(floor) -> None:
     _, sdf, caster = floor
     r = _scan(caster, TRUTH)
     # a crowd on one side: the beams of a 60 degree sector return at 1 m
-    crowd = np.abs(wrap_angle(ANGLES - 1.0)) < math.radians(30)
+    crowd = np.abs(wrap_angles(ANGLES - 1.0)) < math.radians(30)
     r[crowd] = 1.0
     fix = refine(sdf, (4.35, 5.16, 0.43), (0.0, 0.0, 0.0), ANGLES, r, RANGE_MAX_M)
     assert fix is not None

@@ -11,6 +11,7 @@ from typing import Any
 import pytest
 import websockets
 from websockets.exceptions import InvalidStatus
+from websockets.typing import Subprotocol
 
 from sage_robot.app.recording.gate import Upgrade, foxglove_token, is_loopback_host
 from sage_robot.app.recording.nodes import FoxgloveNode
@@ -21,7 +22,7 @@ from sage_robot.core.msgs import Odometry, Pose2D, Twist
 from sage_robot.core.node import NodeContext
 
 PASSWORD = "fox-test-pw"
-SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+SUBPROTOCOLS = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
 WAIT_S = 5.0
 
 

@@ -2,6 +2,7 @@
 
 import asyncio
 import json
+from typing import Any
 
 import numpy as np
 import pytest
@@ -63,6 +64,7 @@ def test_mcap_round_trip_with_ros2_schemas(tmp_path):
 
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
+    assert summary is not None
     schemas = {s.name: s.encoding for s in summary.schemas.values()}
     assert schemas["sensor_msgs/msg/LaserScan"] == "ros2msg"
     assert {
@@ -125,6 +127,7 @@ async def test_recorder_node_records_bus_traffic(tmp_path):
 
 async def test_foxglove_server_advertises_live_topics():
     import websockets
+    from websockets.typing import Subprotocol
 
     clock = SimClock()
     bus = Bus(clock)
@@ -136,8 +139,9 @@ async def test_foxglove_server_advertises_live_topics():
     try:
         bus.publish("/odom", Odometry(0.0, Pose2D(1, 2, 0), Twist()))
         url = f"ws://127.0.0.1:{node.port}"
-        async with websockets.connect(url, subprotocols=["foxglove.sdk.v1", "foxglove.websocket.v1"]) as ws:
-            seen: dict[str, dict] = {}
+        protocols = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
+        async with websockets.connect(url, subprotocols=protocols) as ws:
+            seen: dict[str, dict[str, Any]] = {}
             for _ in range(20):  # bounded: serverInfo, advertise, ...
                 raw = await asyncio.wait_for(ws.recv(), 5)
                 if isinstance(raw, str):

@@ -15,7 +15,7 @@ def campus_grid() -> OccupancyGrid:
 
 
 @pytest.fixture(scope="session")
-def campus_raycaster(campus_grid: OccupancyGrid):  # type: ignore[no-untyped-def]
+def campus_raycaster(campus_grid: OccupancyGrid):
     from sage_robot.sim.raycast import GridRaycaster
 
     return GridRaycaster(campus_grid)

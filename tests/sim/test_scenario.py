@@ -88,11 +88,12 @@ async def test_world_node_runs_a_scenario_on_the_sim_clock() -> None:
         got[topic] = []
         ctx.bus.subscribe(topic, kind, got[topic].append, maxsize=1000)
 
-    for topic, kind in [
+    streams: list[tuple[str, type]] = [
         (topics.SCAN, LaserScan), (topics.SIM_COLLISIONS, Event), (topics.SIM_TRUTH, Odometry),
         (topics.SIM_PEOPLE, People), (topics.SIM_SPEAKER, SpeakerBearing), (topics.CAMERA, CompressedImage),
         (topics.SIM_SPEAKER_BEARING, Doa),
-    ]:  # fmt: skip
+    ]  # fmt: skip
+    for topic, kind in streams:
         collect(topic, kind)
     await run_launcher(ctx, [NodeSpec("sim_world", WorldNode, True)], until=6.0)
     world = ctx.resources[WORLD_RESOURCE]
@@ -243,9 +244,11 @@ async def test_teleop_through_the_serial_bridge_and_firmware_follows_direct_driv
 def test_web_addresses_and_node_selection_errors() -> None:
     from sage_robot.cli.run import web_addresses
 
-    urls = web_addresses(load_profile(None, {"web": {"port": 8123}}))
-    assert urls[0] == "http://localhost:8123/"
-    assert all(u.startswith("http://localhost:8123/") for u in urls)
+    urls = web_addresses(load_profile(None, {"web": {"port": 8123}}))  # on every address: HTTPS
+    assert urls[0] == "https://localhost:8123/"
+    assert all(u.startswith("https://localhost:8123/") for u in urls)
+    local = web_addresses(load_profile(None, {"web": {"port": 8123, "host": "127.0.0.1"}}))
+    assert local[0] == "http://localhost:8123/"
     proc = run_cli("sim", "--headless", "--nodes", "sim_world,warp_drive", "--duration", "1", timeout=60)
     assert proc.returncode == 2
     assert "warp_drive not in the sim profile" in proc.stderr
@@ -300,7 +303,7 @@ async def test_a_failing_physics_step_restarts_the_node_and_keeps_the_world() ->
                 raise ValueError("boom")
             real_step(dt)
 
-        world.step = step
+        world.step = step  # type: ignore[method-assign]  # on purpose: the step fails once
 
     launcher = await run_launcher(
         ctx, [NodeSpec("sim_world", WorldNode, True)], until=3.0, after_start=break_once

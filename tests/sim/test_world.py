@@ -34,7 +34,7 @@ HALL = """
 """
 
 
-def hall_world(**kw) -> World:  # type: ignore[no-untyped-def]
+def hall_world(**kw) -> World:
     grid = draw(HALL, 0.5)
     kw.setdefault("lidar", LidarSpec(noise_fraction=0.0, noise_floor_m=0.0, dropout_probability=0.0))
     return World(grid, kw.pop("start", (2.0, 2.0, 0.0)), **kw)

@@ -70,8 +70,8 @@ async def test_teleop_drive_in_slam_mode(tmp_path: Path) -> None:
     rows, cols = np.nonzero(grid.data == 100)
     xs = grid.origin.x + (cols + 0.5) * grid.resolution
     ys = grid.origin.y + (rows + 0.5) * grid.resolution
-    truth = GridRaycaster(read_map(Path(world_map_path())))
-    near = truth.clearance(xs, ys) <= 0.15
+    walls = GridRaycaster(read_map(Path(world_map_path())))
+    near = walls.clearance(xs, ys) <= 0.15
     assert len(xs) > 300
     assert near.mean() > 0.8  # walls where the building has walls
 

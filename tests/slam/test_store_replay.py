@@ -11,9 +11,9 @@ import yaml
 
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.mapio import read_map, world_to_cell
-from sage_robot.nav.slam.engine import Slam
+from sage_robot.nav.slam.engine import Keyframe, Slam
 from sage_robot.nav.slam.occupancy import OccupancyMapper
-from sage_robot.nav.slam.points import transform
+from sage_robot.nav.slam.points import Pose, Scan, transform
 from sage_robot.nav.slam.relations import read_relations, relation_error
 from sage_robot.nav.slam.replay import replay_log
 from sage_robot.nav.slam.store import build_map, load_session, save_session
@@ -24,7 +24,7 @@ CSAIL = "slam/mit-csail/mit-csail.clf"
 CSAIL_RELATIONS = "slam/mit-csail/mit-csail.relations"
 
 
-def short_session(n: int = 40) -> tuple[Slam, list, list]:
+def short_session(n: int = 40) -> tuple[Slam, list[Pose], list[Scan]]:
     truth = loop_path(step_m=0.35)[:n]
     drive = simulate(corridor_loop(), truth, yaw_drift=0.01)
     slam = Slam(initial_pose=truth[0])
@@ -54,10 +54,10 @@ def test_save_load_round_trip_and_resume(tmp_path: Path) -> None:
     assert [(e.i, e.j, e.kind) for e in back.graph.edges] == [(e.i, e.j, e.kind) for e in slam.graph.edges]
     for a, b in zip(back.graph.edges, slam.graph.edges, strict=True):
         np.testing.assert_allclose(a.information, b.information)
-    for a, b in zip(back.keyframes, slam.keyframes, strict=True):
-        np.testing.assert_array_equal(a.scan.ranges, b.scan.ranges)
-        assert a.odom == b.odom
-        assert a.stamp == b.stamp
+    for ka, kb in zip(back.keyframes, slam.keyframes, strict=True):
+        np.testing.assert_array_equal(ka.scan.ranges, kb.scan.ranges)
+        assert ka.odom == kb.odom
+        assert ka.stamp == kb.stamp
     assert back.config == slam.config
     # Resume: the robot is where the session ended; a new scan there matches the old map.
     result = back.add_scan(99.0, (5.0, 5.0, 1.0), scans[-1])
@@ -78,7 +78,7 @@ def test_bad_names_and_files(tmp_path: Path) -> None:
         load_session(tmp_path / "junk.graph.npz")
 
 
-def wall_agreement(poses: list, keyframes: list) -> float:
+def wall_agreement(poses: list[Pose], keyframes: list[Keyframe]) -> float:
     """Fraction of keyframe hits within one cell of a wall of the map built from ``poses``."""
     mapper = OccupancyMapper(0.05, 30.0)
     mapper.rebuild(poses, [kf.scan for kf in keyframes])

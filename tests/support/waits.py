@@ -58,27 +58,28 @@ class _Deadline:
         return None
 
 
-def wait_until(cond: Callable[[], T], what: str | None = None, timeout: float = WAIT_S, *,
+def wait_until(cond: Callable[[], T | None], what: str | None = None, timeout: float = WAIT_S, *,
                poll: float = POLL_S, detail: Callable[[], Any] | None = None) -> T:
     """Block (wall clock) until ``cond()`` is truthy and return its value; fail after ``timeout`` s."""
     deadline = _Deadline(time.monotonic, timeout, "s", cond, what, detail)
     while not (value := deadline.check()):
         time.sleep(poll)
-    return value  # type: ignore[no-any-return]
+    return value
 
 
-async def until(cond: Callable[[], T], what: str | None = None, timeout: float = WAIT_S, *,
+async def until(cond: Callable[[], T | None], what: str | None = None, timeout: float = WAIT_S, *,
                 poll: float = POLL_S, detail: Callable[[], Any] | None = None) -> T:
     """Await (wall clock) until ``cond()`` is truthy and return its value; fail after ``timeout`` s."""
     deadline = _Deadline(time.monotonic, timeout, "s", cond, what, detail)
     # A poll, not an Event: the condition is any expression over state the test cannot hook.
     while not (value := deadline.check()):  # noqa: ASYNC110
         await asyncio.sleep(poll)
-    return value  # type: ignore[no-any-return]
+    return value
 
 
-async def sim_until(clock: Any, cond: Callable[[], T], what: str | None = None, timeout_s: float = 30.0, *,
-                    step_s: float = 0.1, detail: Callable[[], Any] | None = None) -> T:
+async def sim_until(clock: Any, cond: Callable[[], T | None], what: str | None = None,
+                    timeout_s: float = 30.0, *, step_s: float = 0.1,
+                    detail: Callable[[], Any] | None = None) -> T:
     """Await (simulated time) until ``cond()`` is truthy; fail after ``timeout_s`` simulated s.
 
     Another task advances ``clock`` (a running ``SimClock``); this one sleeps on it.
@@ -86,10 +87,10 @@ async def sim_until(clock: Any, cond: Callable[[], T], what: str | None = None, 
     deadline = _Deadline(clock.now, timeout_s, "simulated s", cond, what, detail)
     while not (value := deadline.check()):
         await clock.sleep(step_s)
-    return value  # type: ignore[no-any-return]
+    return value
 
 
-async def sim_step_until(clock: Any, cond: Callable[[], T], what: str | None = None,
+async def sim_step_until(clock: Any, cond: Callable[[], T | None], what: str | None = None,
                          timeout_s: float = 60.0, *, step_s: float = 0.1, real_pause_s: float = 0.0,
                          detail: Callable[[], Any] | None = None) -> T:
     """Step ``clock`` (a ``SimClock`` nobody else drives) until ``cond()`` is truthy; fail after
@@ -99,7 +100,7 @@ async def sim_step_until(clock: Any, cond: Callable[[], T], what: str | None = N
     while not (value := deadline.check()):
         await clock.step(step_s)
         await asyncio.sleep(real_pause_s)
-    return value  # type: ignore[no-any-return]
+    return value
 
 
 async def drain(turns: int = 5) -> None:

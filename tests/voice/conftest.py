@@ -64,7 +64,9 @@ def neutral_and_noise(say16k) -> np.ndarray:
                           + [noise(3, 800), noise(2, 2000, seed=1)])  # fmt: skip
 
 
-def chunked_runs(engine, settings, audio: np.ndarray, key: str) -> list[tuple[list, float]]:
+def chunked_runs(
+    engine, settings, audio: np.ndarray, key: str
+) -> list[tuple[list[tuple[str, float, float]], float]]:
     """The profile detector over ``audio`` fed in 80 ms, 333- and 4096-sample chunks:
     per run, its detections (model, time, score) and the best smoothed score of ``key``."""
     from sage_robot.core.audio import FRAME_SAMPLES

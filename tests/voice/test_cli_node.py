@@ -86,7 +86,7 @@ async def test_voice_node_in_simulation(models, monkeypatch, tmp_path, pocketsph
         await until(lambda: node.pipeline is not None, timeout=WAIT_S)
         await until(lambda: bus.topics().get(SIM_VISITOR_SAY) is not None, timeout=WAIT_S)
         bus.publish(SIM_VISITOR_SAY, Text("Hey Jarvis."))
-        await until(lambda: node.pipeline.detections, timeout=WAIT_S)
+        await until(lambda: node.pipeline is not None and node.pipeline.detections, timeout=WAIT_S)
         go = load_audio(pocketsphinx_data / "goforward.raw")  # a real recording, as a WAV would be
         bus.publish(SIM_VISITOR_AUDIO, AudioChunk(clock.now(), 16000, go.astype("<i2").tobytes()))
         await until(lambda: list(tmp_path.glob("*.wav")), timeout=WAIT_S)

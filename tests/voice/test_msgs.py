@@ -39,7 +39,7 @@ def test_ui_state_keeps_the_seed_face_protocol():
 
 def test_missing_steps_stay_nan_through_json():
     msg = TurnLatency(1.0, 1, end_of_speech=2.0)
-    back = from_dict(json.loads(json.dumps(to_dict(msg))))
+    back: TurnLatency = from_dict(json.loads(json.dumps(to_dict(msg))))
     assert math.isnan(back.first_audio)
     assert math.isnan(back.reply_delay_s)
     assert TurnLatency(1.0, 1, 0.0, 2.0, 2.5, 2.7, 2.9).reply_delay_s == pytest.approx(0.9)

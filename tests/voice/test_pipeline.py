@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -101,7 +102,7 @@ def echo_brain(bus: Bus, clock: SimClock, goals: list[str], pause_s: float = 0.3
     bus.actions.serve(CONVERSE, handler)
 
 
-def is_subsequence(needle: list, hay: list) -> bool:
+def is_subsequence(needle: Sequence[object], hay: Sequence[object]) -> bool:
     it = iter(hay)
     return all(any(x is y for y in it) for x in needle)
 
@@ -280,7 +281,8 @@ async def test_nothing_understood_goes_back_to_resting(voice_settings, models, s
     goals: list[str] = []
     echo_brain(room.bus, room.clock, goals)
     mumble = _MumbleStt(room.pipeline.turn.stt)
-    room.pipeline.turn.stt = room.pipeline.live.stt = mumble  # the final and the early transcript
+    # the final and the early transcript; a stand-in for SpeechToText (only transcribe is called)
+    room.pipeline.turn.stt = room.pipeline.live.stt = mumble  # type: ignore[assignment]
     room.mic.inject(np.concatenate([silence(0.5), say16k("Hey Jarvis."), silence(0.5),
                                     say16k("Where is the library?"), silence(0.8)]))
     async with room:

@@ -12,7 +12,7 @@ from sage_robot.core.audio import FRAME_S, FRAME_SAMPLES
 from sage_robot.core.errors import ConfigError
 from sage_robot.voice.audio_io import Framer, load_audio, resample
 from sage_robot.voice.stt import SpeechToText, Transcript, transcribe_pcm
-from sage_robot.voice.vad import EndReason, SileroVad, UtteranceRecorder
+from sage_robot.voice.vad import EndReason, SileroVad, Utterance, UtteranceRecorder
 from sage_robot.voice.wake import WakeDetector
 
 from .conftest import noise, silence
@@ -94,7 +94,7 @@ def test_vad_scores_speech_high_and_silence_low(models, say16k):
     assert vad.speech_seconds(noise(2.0), 0.5) == 0.0
 
 
-def run_recorder(audio: np.ndarray, vad: SileroVad, **kw) -> tuple[UtteranceRecorder, object, int]:
+def run_recorder(audio: np.ndarray, vad: SileroVad, **kw) -> tuple[UtteranceRecorder, Utterance | None, int]:
     rec = UtteranceRecorder(**kw)
     vad.reset()
     for n, frame in enumerate(Framer(FRAME_SAMPLES).push(audio)):
@@ -123,9 +123,11 @@ def test_utterance_ends_after_silence_and_keeps_the_preroll(models, say16k):
 def test_max_length_and_no_speech(models, say16k):
     long = np.concatenate([say16k("Please follow me and mind the step.")] * 3)
     _, utt, _ = run_recorder(np.concatenate([silence(0.3), long]), models.vad, max_s=2.0)
+    assert utt is not None
     assert utt.reason is EndReason.MAX_LENGTH
     assert len(utt.pcm) / 16000 <= 2.0 + FRAME_S
     _, utt, n = run_recorder(noise(3.0), models.vad, start_timeout_s=1.2)
+    assert utt is not None
     assert utt.reason is EndReason.NO_SPEECH
     assert len(utt.pcm) == 0
     assert (n + 1) * FRAME_S == pytest.approx(1.2, abs=FRAME_S)

@@ -14,6 +14,7 @@ import httpx
 import pytest
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import connect
+from websockets.typing import Origin
 
 from sage_robot.core import topics
 from sage_robot.core.actions import CANCEL_WAIT_S
@@ -52,7 +53,7 @@ def test_foreign_origin_is_refused_even_with_login(robot: Any, cookie: str) -> N
     with pytest.raises(InvalidStatus):
         teleop_ws(robot, cookie, origin="http://evil.example")
     with pytest.raises(InvalidStatus):
-        connect(ws_url(robot, "/ws/status"), origin="http://evil.example", open_timeout=WAIT_S)
+        connect(ws_url(robot, "/ws/status"), origin=Origin("http://evil.example"), open_timeout=WAIT_S)
     own = robot.url  # the page's own origin is fine
     with connect(ws_url(robot, "/ws/status"), origin=own, open_timeout=WAIT_S) as ws:
         assert recv_json(ws, "estop")["engaged"] is False

@@ -70,7 +70,7 @@ def test_origin_check(origin: str | None, host: str, ok: bool) -> None:
 
 def test_rate_limiter_allows_a_burst_then_refills(monkeypatch: pytest.MonkeyPatch) -> None:
     now = [100.0]
-    monkeypatch.setattr(auth.time, "monotonic", lambda: now[0])
+    monkeypatch.setattr("sage_robot.web.auth.time.monotonic", lambda: now[0])
     lim = auth.RateLimiter(rate_per_min=60.0, burst=3)
     assert [lim.allow("a") for _ in range(4)] == [True, True, True, False]
     assert lim.allow("b")  # per address

@@ -7,6 +7,7 @@ import time
 from typing import Any
 
 from websockets.sync.client import connect
+from websockets.typing import Origin
 
 WAIT_S = 10.0  # bound on opening a socket or receiving an awaited message
 
@@ -19,7 +20,7 @@ def teleop_ws(robot: Any, cookie: str, origin: str | None = None) -> Any:
     """The operator's /ws/teleop (``origin``: the Origin header to send, else the client's default)."""
     url, headers = ws_url(robot, "/ws/teleop"), {"Cookie": cookie}
     if origin:
-        return connect(url, origin=origin, additional_headers=headers, open_timeout=WAIT_S)
+        return connect(url, origin=Origin(origin), additional_headers=headers, open_timeout=WAIT_S)
     return connect(url, additional_headers=headers, open_timeout=WAIT_S)
 
 
@@ -35,4 +36,4 @@ def recv_json(ws: Any, kind: str, timeout: float = WAIT_S) -> dict[str, Any]:
         except TimeoutError:
             raise AssertionError(f"timed out after {timeout:g} s waiting for a {kind!r} message") from None
         if msg.get("type") == kind:
-            return msg  # type: ignore[no-any-return]
+            return msg

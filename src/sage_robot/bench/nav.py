@@ -294,7 +294,10 @@ async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[
         deadline = clock.now() + 60.0
         while not all(launcher.health[s.name].state.value == "running" for s in specs):
             if clock.now() > deadline:
-                raise RuntimeError(f"nodes did not start: {launcher.health_report()}")
+                report = launcher.health_report()
+                why = "; ".join(f"{name}: {h['last_error']}" for name, h in report.items()
+                                if h.get("state") != "running" and h.get("last_error"))
+                raise RuntimeError(f"nodes did not start: {why or report}")
             await clock.sleep(0.1)
         return await _legs(ctx, launcher, legs, keep)
     finally:
@@ -354,7 +357,8 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
             ok, why = False, f"timed out after {LEG_TIMEOUT_S:g} s"
         short_m = math.hypot(goal.x - world.x, goal.y - world.y)
         if ok and short_m > ARRIVED_M:  # the simulator's truth, not the navigator's word
-            ok, why = False, f"the navigator reported arrival {short_m:.1f} m from the goal ({why or 'no note'})"
+            ok, why = False, (f"the navigator reported arrival {short_m:.1f} m from the goal "
+                              f"({why or 'no note'})")
         rec = {"from": a, "to": b, "ok": ok, "reason": "" if ok else why,
                "collisions": world.collisions - c0, "time_s": round(clock.now() - t0, 1),
                "length_m": round(world.distance_m - d0, 2), "shortest_m": round(shortest, 2),

@@ -107,9 +107,9 @@ FULL_GOAL = "3D_PRINTING_LAB"  # a place of the shipped building the robot drive
 async def _system(settings: Any, seconds: float, nodes: tuple[str, ...], goal: str = "") -> dict[str, Any]:
     """The named nodes of the sim profile on the simulated clock, as fast as possible."""
     from sage_robot.app.runtime import make_context, run_launcher, specs_for
-    from sage_robot.core.node import SIM_STEP_HOOKS
     from sage_robot.core import topics
     from sage_robot.core.msgs.nav import NavigateGoal
+    from sage_robot.core.node import SIM_STEP_HOOKS
     from sage_robot.sim.node import WORLD_RESOURCE
 
     ctx = make_context(settings, simulated=True)

@@ -51,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(func=run_replay)
 
     p = sub.add_parser("status", help="health of every node of a running robot (from its web server)")
-    p.add_argument("--url", help="robot web address (default http://127.0.0.1:<web.port>)")
+    p.add_argument("--url", help="robot web address (default http(s)://127.0.0.1:<web.port>, per web.tls)")
     p.add_argument("--json", action="store_true", help="print the raw JSON")
     p.set_defaults(func=run_status)
 
@@ -105,10 +105,13 @@ def run_replay(args: argparse.Namespace) -> int:
 
 def run_status(args: argparse.Namespace) -> int:
     from sage_robot.core.config import load_profile
+    from sage_robot.web.tls import client_context, local_url
 
-    url = (args.url or f"http://127.0.0.1:{load_profile(args.profile).web.port}").rstrip("/") + "/api/health"
+    web = load_profile(args.profile).web
+    url = (args.url or local_url(web)).rstrip("/") + "/api/health"
     try:
-        with urllib.request.urlopen(url, timeout=5) as resp:
+        context = client_context(web) if url.startswith("https:") else None
+        with urllib.request.urlopen(url, timeout=5, context=context) as resp:
             report = json.load(resp)
     except (urllib.error.URLError, OSError) as exc:
         raise SageError(f"no robot answers at {url} ({exc}); is `sage sim` or `sage up` running?") from None

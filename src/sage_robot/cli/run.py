@@ -78,8 +78,10 @@ def _overrides(args: argparse.Namespace, scenario: Any) -> dict[str, Any]:
 
 
 def web_addresses(settings: Settings) -> list[str]:
-    """The pages the web node serves, as URLs on this machine."""
-    base = f"http://localhost:{settings.web.port}"
+    """The pages the web node serves, as URLs on this machine (https when ``web.tls`` says so)."""
+    from sage_robot.web.tls import tls_enabled
+
+    base = f"{'https' if tls_enabled(settings.web) else 'http'}://localhost:{settings.web.port}"
     try:
         app = importlib.import_module("sage_robot.web.app")
         pages = list(getattr(app, "PUBLIC_PAGES", {})) + list(getattr(app, "OPERATOR_PAGES", {}))

@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     r.set_defaults(func=run_replay)
     v = ssub.add_parser("save", help="save the running session as NAME, or a saved one again (--from)")
     v.add_argument("name", help="map name (files NAME.yaml, NAME.pgm, ...)")
-    v.add_argument("--url", help="robot web address (default http://127.0.0.1:<web.port>)")
+    v.add_argument("--url", help="robot web address (default http(s)://127.0.0.1:<web.port>, per web.tls)")
     v.add_argument("--from", dest="source", help="instead: write a saved NAME.graph.npz again")
     v.add_argument("--out", help="with --from: output directory (default: ./maps)")
     v.add_argument("--resolution", type=float, default=0.05, help="with --from: map cell size (m)")
@@ -109,8 +109,13 @@ def save_running(args: argparse.Namespace) -> int:
     from sage_robot.core.config import load_profile
 
     settings = load_profile(args.profile)
-    base = (args.url or f"http://127.0.0.1:{settings.web.port}").rstrip("/")
-    opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(CookieJar()))
+    from sage_robot.web.tls import client_context, local_url
+
+    base = (args.url or local_url(settings.web)).rstrip("/")
+    handlers: list[Any] = [urllib.request.HTTPCookieProcessor(CookieJar())]
+    if base.startswith("https:"):  # the robot's own (maybe self-signed) certificate
+        handlers.append(urllib.request.HTTPSHandler(context=client_context(settings.web)))
+    opener = urllib.request.build_opener(*handlers)
     _post(opener, base, "/api/login", {"password": client_password(settings)})
     reply = _post(opener, base, "/api/slam/save", {"name": args.name})
     print(f"map: {reply['yaml']}\npose graph: {reply['graph']}\ntrajectory: {reply['trajectory']}")

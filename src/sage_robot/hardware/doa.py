@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 from sage_robot.core.errors import DeviceNotConnectedError
 
@@ -78,7 +79,7 @@ class XVF3800Doa:
 
     def __init__(self, offset_deg: float = 0.0, vid: int = USB_VID, pid: int = USB_PID) -> None:
         self.offset_deg, self.vid, self.pid = offset_deg, vid, pid
-        self._dev = None
+        self._dev: Any = None  # the usb.core device, once open
         self.last_deg = FRONT_DEG
 
     def open(self) -> None:

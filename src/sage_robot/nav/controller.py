@@ -3,7 +3,9 @@
 Each step: prune the path behind the robot, pick the carrot ``lookahead_m`` ahead, and
 steer on the arc through it (curvature ``2 y / L²`` in the robot frame). The speed is
 then regulated: down on tight curves (radius below ``REGULATED_MIN_RADIUS_M``), near
-obstacles (closer than ``COST_SCALING_DIST_M``), near the goal, and to the speed-zone
+obstacles (clearance beyond the inscribed radius, here and up to 0.3 m ahead, below
+``COST_SCALING_DIST_M``: through a gap only 0.1 m wider than the robot it creeps at
+``MIN_REGULATED_SPEED_MPS``), near the goal, and to the speed-zone
 limit. When the carrot is too far off to the side the robot rotates in place. The arc
 is checked ``COLLISION_HORIZON_S`` ahead on the costmap; a collision means stop and
 report ``blocked``. The forward speed is never negative (the seed's robot never reverses).
@@ -24,16 +26,19 @@ from sage_robot.nav.costmap import Costmap
 REGULATED_MIN_RADIUS_M = 0.9  # regulated_linear_scaling_min_radius
 COST_SCALING_DIST_M = 0.6  # slow down when an obstacle is nearer than this
 COST_SCALING_GAIN = 1.0
+CLEARANCE_AHEAD_M = (0.0, 0.15, 0.3)  # the clearance that sets the speed is taken here and ahead (m)
 MIN_REGULATED_SPEED_MPS = 0.15  # regulated_linear_scaling_min_speed
 APPROACH_DIST_M = 0.6  # approach_velocity_scaling_dist: slow down over the last metres
 MIN_APPROACH_SPEED_MPS = 0.05
 ROTATE_TO_HEADING_MIN_ANGLE_RAD = 0.785  # rotate in place when the carrot is further off than this
 ROTATE_SPEED_RADPS = 0.8  # rotate_to_heading_angular_vel
+ROTATE_KEEP_SIDE_RAD = 0.6  # a carrot within this of straight behind keeps the turn's direction
 COLLISION_HORIZON_S = 1.0  # max_allowed_time_to_collision_up_to_carrot
 COLLISION_STEP_M = 0.05
 MIN_COLLISION_CHECK_M = 0.5  # look at least this far ahead, however slow the command
 MIN_LOOKAHEAD_M = 0.3
 CLOSE_LOOKAHEAD_M = 0.4  # fallback carrot when the full-lookahead arc would collide (m)
+CLOSE_HOLD_M = 0.4  # once on the fallback carrot, keep to it for this much of the path (m)
 
 
 @dataclass(frozen=True)
@@ -67,6 +72,10 @@ class PurePursuit:
         self.goal_yaw = goal_yaw
         self._i = 0  # index of the closest path point so far
         self._at_goal_xy = False
+        self._turn = 0.0  # the way it last rotated in place toward the carrot (+1, -1; 0 none)
+        self._close_until = 0  # path index up to which the short carrot is used
+        seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.array([0.05])
+        self._spacing = max(float(np.median(seg)), 1e-3)
 
     def remaining_m(self) -> float:
         seg = self.path[self._i:]
@@ -94,10 +103,14 @@ class PurePursuit:
         if self._at_goal_xy or dist_goal <= p.xy_tolerance_m:
             self._at_goal_xy = True
             return self._align(th)
+        if self._i < self._close_until:  # hugging the path: stay on the short carrot a while
+            return self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap)
         cmd = self._pursue(pose, max(MIN_LOOKAHEAD_M, min(p.lookahead_m, dist_goal)), dist_goal, costmap)
         if cmd.blocked:
             # the long arc cuts a corner the path goes around: hug the path with a short carrot
+            # (and keep to it for CLOSE_HOLD_M, or the two carrots can turn the robot to and fro)
             cmd = self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap)
+            self._close_until = self._i + max(1, round(CLOSE_HOLD_M / self._spacing))
         return cmd
 
     def _pursue(self, pose: tuple[float, float, float], lookahead: float, dist_goal: float,
@@ -110,8 +123,14 @@ class PurePursuit:
         lx, ly = c * dx + s * dy, -s * dx + c * dy
         angle = math.atan2(ly, lx)
         if abs(angle) > ROTATE_TO_HEADING_MIN_ANGLE_RAD:
-            # a round robot can always turn where it stands
-            return Command(0.0, math.copysign(min(ROTATE_SPEED_RADPS, p.max_w), angle), rotating=True)
+            # a round robot can always turn where it stands; with the carrot behind it, keep the
+            # way it was turning (else the sign of a carrot at +-pi flips every step: it shivers)
+            turn = math.copysign(1.0, angle)
+            if self._turn and abs(angle) > math.pi - ROTATE_KEEP_SIDE_RAD:
+                turn = self._turn
+            self._turn = turn
+            return Command(0.0, turn * min(ROTATE_SPEED_RADPS, p.max_w), rotating=True)
+        self._turn = 0.0
         l2 = lx * lx + ly * ly
         curvature = 2.0 * ly / l2 if l2 > 1e-9 else 0.0
         v = self._regulate(p.max_v, curvature, dist_goal, pose, costmap)
@@ -138,7 +157,7 @@ class PurePursuit:
         if abs(curvature) > 1e-9 and 1.0 / abs(curvature) < REGULATED_MIN_RADIUS_M:
             v *= (1.0 / abs(curvature)) / REGULATED_MIN_RADIUS_M
         if costmap is not None:
-            d = costmap.distance_at(pose[0], pose[1]) - costmap.inscribed_m
+            d = self._clearance(pose, costmap) - costmap.inscribed_m
             if d < COST_SCALING_DIST_M:
                 v *= COST_SCALING_GAIN * max(d, 0.0) / COST_SCALING_DIST_M
         v = max(v, MIN_REGULATED_SPEED_MPS)
@@ -147,6 +166,14 @@ class PurePursuit:
         if costmap is not None:
             v = min(v, self.params.max_v * costmap.speed_limit_at(pose[0], pose[1]))
         return v
+
+    @staticmethod
+    def _clearance(pose: tuple[float, float, float], costmap: Costmap) -> float:
+        """The least distance (m) to an obstacle where the robot is and CLEARANCE_AHEAD_M ahead:
+        the speed drops before a tight gap, not in it."""
+        x, y, th = pose
+        c, s = math.cos(th), math.sin(th)
+        return min(costmap.distance_at(x + d * c, y + d * s) for d in CLEARANCE_AHEAD_M)
 
     def _collides(self, pose: tuple[float, float, float], v: float, w: float, costmap: Costmap,
                   carrot_m: float) -> bool:

@@ -53,6 +53,8 @@ WALL_PAD_M = 0.15  # walls get a thinner pad than legs, and still a margin for t
 PERSON_BLOB_M = 0.55
 BLOB_JOIN_M = 0.2
 SOFT_PAD_CLEAR_M = 0.02
+ATTACHED_M = 0.3  # a small blob this near a wall or a larger blob belongs to it (m)
+GAP_MARGIN_M = 0.2  # beside a padded person, a gap keeps at least this much open beyond the robot (m)
 
 
 @dataclass(frozen=True)
@@ -128,6 +130,14 @@ def person_sized(marks: np.ndarray, resolution: float, walls: np.ndarray | None 
         small[np.unique(labels[walls])] = False
         small[0] = False
     out: np.ndarray = small[labels] & marks
+    # a small blob this near a wall or a larger blob is a piece of it (a face the lidar sees at a
+    # grazing angle comes in sparse points), not a person
+    rest = (marks & ~out) if walls is None else (marks & ~out) | walls
+    if out.any() and rest.any():
+        near = ndimage.distance_transform_edt(~rest) * resolution <= ATTACHED_M
+        attached = np.zeros(n + 1, dtype=bool)
+        attached[np.unique(labels[out & near])] = True
+        out &= ~attached[labels]
     return out
 
 
@@ -293,12 +303,42 @@ class Costmap:
             if not marks.any():
                 continue
             raw = ndimage.distance_transform_edt(~marks).astype(np.float32) * self.geom.resolution
-            dist = np.maximum(raw - pad, 0.0)
-            if not hard:  # the pad costs, but never makes a cell the robot fits in impassable
+            if hard:  # people: the full pad, except where it would close a gap the robot fits
+                others = lethal | self.static[r0:r1, c0:c1] | self.keepout[r0:r1, c0:c1]
+                dist = self._capped_pad(marks, others, raw, pad)
+            else:  # the pad costs, but never makes a cell the robot fits in impassable
+                dist = np.maximum(raw - pad, 0.0)
                 dist = np.maximum(dist, np.minimum(raw, self.inscribed_m + SOFT_PAD_CLEAR_M))
             cost = costs_from_distance(dist, marks, self.inscribed_m, self.inflation_m, self.cost_scaling)
             self.cost[r0:r1, c0:c1] = np.maximum(self.cost[r0:r1, c0:c1], cost)
             self.dist[r0:r1, c0:c1] = np.minimum(self.dist[r0:r1, c0:c1], dist)
+
+    def _capped_pad(self, people: np.ndarray, others: np.ndarray, raw: np.ndarray, pad: float) -> np.ndarray:
+        """Distance (m) to the ``people`` marks padded by ``pad``, blob by blob, the pad cut where
+        it would close a gap: between a blob and anything else (``others``: every lethal cell) a
+        gap of width ``w`` keeps ``w - 2 inscribed - GAP_MARGIN_M`` open, shared by both sides."""
+        res = self.geom.resolution
+        out = np.maximum(raw - pad, 0.0)
+        join = max(1, round(BLOB_JOIN_M / res / 2))
+        disk = np.hypot(*np.mgrid[-join:join + 1, -join:join + 1]) <= join
+        labels, _n = ndimage.label(ndimage.binary_dilation(people, structure=disk), structure=np.ones((3, 3)))
+        m = math.ceil((2 * self.inscribed_m + 2 * pad + GAP_MARGIN_M) / res) + 1
+        for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+            if sl is None:
+                continue
+            rs = slice(max(sl[0].start - m, 0), min(sl[0].stop + m, people.shape[0]))
+            cs = slice(max(sl[1].start - m, 0), min(sl[1].stop + m, people.shape[1]))
+            blob = people[rs, cs] & (labels[rs, cs] == i)
+            rest = others[rs, cs] & ~blob
+            if not rest.any():
+                continue
+            near = ndimage.distance_transform_edt(~blob).astype(np.float32) * res
+            far = ndimage.distance_transform_edt(~rest).astype(np.float32) * res
+            cap = np.clip((near + far - 2 * self.inscribed_m - GAP_MARGIN_M) / 2, 0.0, pad)
+            band = (near <= raw[rs, cs] + 1e-3) & (cap < pad)  # cells this blob is the nearest to
+            sub = out[rs, cs]
+            sub[band] = np.maximum(sub[band], near[band] - cap[band])
+        return out
 
     # ------------------------------------------------------------------ queries
     def cost_at(self, x: np.ndarray | float, y: np.ndarray | float) -> np.ndarray:

@@ -10,7 +10,13 @@ collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
    getting anywhere, it goes on waiting with what is left of the time;
 3. replan around whatever is still there;
 4. spin in place (a full turn refreshes the costmaps), replan;
-5. abort with a reason a person understands.
+5. abort with a reason that is true (:meth:`GoalRun._why_blocked`): people (what blocks the
+   way moved while the robot watched, or is person-sized), an obstacle that is not on the
+   map (it stood still and is bigger than a person), or a closed passage (no way even on
+   the map: said at once, nothing is waited for).
+
+Where ``robot.allow_reverse`` is true, a robot stopped close in front of an obstacle first
+backs off (at most ``BACKUP_M``, slowly, only onto floor that is clear behind it).
 
 Before each rung, a robot that stands within the inscribed radius of an obstacle (the
 forward check stops every arc that gets closer, and it never reverses) first turns toward
@@ -34,6 +40,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from scipy import ndimage
 
 from sage_robot.core import topics
 from sage_robot.core.actions import ActionAborted
@@ -42,7 +49,7 @@ from sage_robot.core.geometry import wrap_angle
 from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.nav import NavigateFeedback, NavigateResult, NavState
 from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_heading
-from sage_robot.nav.planner import NoPath, Plan, path_blocked, plan
+from sage_robot.nav.planner import PATH_SPACING_M, NoPath, Plan, path_blocked, plan
 
 if TYPE_CHECKING:
     from sage_robot.nav.costmap import Costmap
@@ -73,6 +80,14 @@ STEP_AWAY_TURN_RADPS = 0.6
 STEP_AWAY_ALIGNED_RAD = 0.1  # turned toward the escape heading within this (rad)
 STEP_AWAY_SLACK = 3.0  # time allowed: this many times the time the step should take
 STEP_AWAY_LOOK_M = 0.1  # creeping stops when the floor this far ahead is nearer an obstacle (m)
+BACKUP_M = 0.3  # longest reverse in a recovery (only where robot.allow_reverse) (m)
+BACKUP_SPEED_MPS = 0.1
+BACKUP_WHEN_AHEAD_M = 0.35  # back off when an obstacle is this near in front beyond the inscribed radius (m)
+BACKUP_CLEAR_M = 0.05  # the floor behind must stay this much beyond the inscribed radius (m)
+BLOCKER_NEAR_M = 0.5  # scan marks this near the intended path block it (m)
+BLOCKER_MOVED_M = 0.15  # a blocking mark this far from every mark of the first look has moved (m)
+BLOCKER_MOVED_CELLS = 3  # ... and it takes this many such cells (scan noise moves one or two)
+PERSON_SIZED_M = 0.6  # a blocking blob no wider than this could be a person (m)
 
 
 @dataclass(frozen=True)
@@ -104,6 +119,9 @@ class GoalRun:
         self._level_xy: tuple[float, float] | None = None
         self._waited_s = 0.0  # waited for people since the ladder last reset (s)
         self._cleared = False  # the last wait ended because the path looked free
+        self._first_blockers: np.ndarray | None = None  # what blocked the path at the wait's first look
+        self._blocker_moved = False  # ... and whether it has moved since
+        self._blocker_sizes: list[float] = []  # sizes (m) of the blobs on the path at the latest look
 
     # ------------------------------------------------------------ small steps
     def feedback(self, state: NavState) -> None:
@@ -271,6 +289,8 @@ class GoalRun:
                 return note
         self.feedback(NavState.RECOVERING)
         await self._step_away()
+        if self.node.settings.robot.allow_reverse:
+            await self._back_off()
         if level == 0:
             self.node.clear_costmaps()
             await self.clock.sleep(CLEAR_SETTLE_S)
@@ -281,11 +301,25 @@ class GoalRun:
         elif level == 3:
             await self._spin(2 * math.pi, SPIN_SPEED_RADPS)
         else:
-            where = f"to {self.target.spoken}" if self.target.name else "to the goal"
-            waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
-                if self._waited_s >= 1.0 else "I "
-            raise ActionAborted(f"the way {where} is blocked: {waited}found no way around")
+            raise ActionAborted(self._why_blocked())
         return ""
+
+    def _why_blocked(self) -> str:
+        """Why the robot gives up, as it saw it: people when what blocks the intended path moved
+        while it watched or is person-sized; an obstacle not on the map when it stood still and
+        is bigger than a person."""
+        where = f"to {self.target.spoken}" if self.target.name else "to the goal"
+        sizes = self._blocker_sizes
+        if sizes and not self._blocker_moved and min(sizes) > PERSON_SIZED_M:
+            waited = f" (I watched it {self._waited_s:.0f} s: it did not move)" \
+                if self._waited_s >= 1.0 else ""
+            return (f"the way {where} is blocked by an obstacle that is not on the map, about "
+                    f"{max(sizes):.1f} m across{waited}; I found no way around it")
+        if sizes or self._blocker_moved:
+            waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
+                if self._waited_s >= 1.0 else "people are in the way and "
+            return f"the way {where} is blocked: {waited}found no way around"
+        return f"the way {where} is blocked: I found no way around"
 
     def _settle_note(self, pose: tuple[float, float, float]) -> str:
         """Within SETTLE_NEAR_GOAL_M of a goal people stand on: arrive there, with a note.
@@ -305,8 +339,11 @@ class GoalRun:
         self._cleared = False  # (an early return below must let the ladder climb on)
         try:
             intended = await self._plan(with_obstacles=False)
-        except Blocked:
-            return
+        except Blocked as exc:
+            where = f"to {self.target.spoken}" if self.target.name else "to the goal"
+            raise ActionAborted(f"the way {where} is closed on the map: there is no passage I fit "
+                                f"through ({exc})") from None
+        self._first_blockers, self._blocker_moved, self._blocker_sizes = None, False, []
         self.feedback(NavState.WAITING_FOR_PEOPLE)
         node.event("blocked_by_people", "excuse me, may I pass?", place=self.target.name)
         t0, before = self.clock.now(), self._waited_s
@@ -337,10 +374,48 @@ class GoalRun:
         d = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
         ahead = points[int(np.argmin(d)):]
         ahead = ahead[np.hypot(ahead[:, 0] - pose[0], ahead[:, 1] - pose[1]) > self.params.xy_tolerance_m]
+        self._look_at_blockers(node.global_cm, ahead)
         if path_blocked(node.global_cm, ahead, WATCH_AHEAD_M):
             return False
         return len(ahead) < 2 or local is None or \
             not PurePursuit(ahead, self.params, self.target.pose[2]).step(pose, local).blocked
+
+    def _look_at_blockers(self, cm: Costmap, ahead: np.ndarray) -> None:
+        """Note what the scan marks on the first WATCH_AHEAD_M of the intended path: the sizes of
+        its blobs, and whether it moved since the wait's first look."""
+        res = cm.geom.resolution
+        pts = ahead[:max(1, int(WATCH_AHEAD_M / PATH_SPACING_M))]
+        k = max(1, round(BLOCKER_NEAR_M / res))
+        r, c = cm.geom.to_cell(pts[:, 0], pts[:, 1]) if len(pts) else cm.geom.to_cell(*self.pose()[:2])
+        r, c = np.atleast_1d(r), np.atleast_1d(c)
+        m = k + round(PERSON_SIZED_M / res) + 4  # the window: the path, the blobs on it, their extent
+        r0, c0 = max(int(r.min()) - m, 0), max(int(c.min()) - m, 0)
+        r1, c1 = min(int(r.max()) + m + 1, cm.geom.shape[0]), min(int(c.max()) + m + 1, cm.geom.shape[1])
+        obstacles = np.zeros(cm.geom.shape, dtype=bool)
+        obstacles[r0:r1, c0:c1] = cm.obstacles[r0:r1, c0:c1]
+        near = np.zeros(cm.geom.shape, dtype=bool)
+        ok = cm.geom.inside(r, c)
+        near[r[ok], c[ok]] = True
+        near[r0:r1, c0:c1] = ndimage.binary_dilation(
+            near[r0:r1, c0:c1], structure=np.hypot(*np.mgrid[-k:k + 1, -k:k + 1]) <= k)
+        marks = obstacles & near
+        labels = np.zeros(cm.geom.shape, dtype=np.int32)
+        labels[r0:r1, c0:c1] = ndimage.label(ndimage.binary_dilation(obstacles[r0:r1, c0:c1], iterations=2),
+                                             structure=np.ones((3, 3)))[0]
+        on_path = np.unique(labels[marks])
+        self._blocker_sizes = []
+        for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+            if sl is not None and i in on_path:
+                self._blocker_sizes.append(
+                    (max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) - 4) * res)
+        if self._first_blockers is None:
+            self._first_blockers = marks.copy()
+            return
+        tol = max(1, round(BLOCKER_MOVED_M / res))
+        for a, b in ((marks, self._first_blockers), (self._first_blockers, marks)):
+            far = a & ~ndimage.binary_dilation(b, iterations=tol) if b.any() else a
+            if int(far.sum()) >= BLOCKER_MOVED_CELLS:
+                self._blocker_moved = True
 
     async def _step_away(self) -> None:
         """Standing within the inscribed radius of an obstacle (every arc toward the path gets
@@ -374,6 +449,30 @@ class GoalRun:
         node.stop()
         x, y, _ = self.pose()
         node.log.info("stepped away from an obstacle", moved_m=round(math.hypot(x - x0, y - y0), 2))
+
+    async def _back_off(self) -> None:
+        """Reverse slowly, at most BACKUP_M, while an obstacle is close in front and the floor
+        behind stays clear (only where ``robot.allow_reverse``): room to turn and replan."""
+        node = self.node
+        x0, y0, _ = self.pose()
+        t_end = self.clock.now() + STEP_AWAY_SLACK * BACKUP_M / BACKUP_SPEED_MPS
+        while self.clock.now() < t_end:
+            cm = node.local_cm
+            if cm is None:
+                break
+            x, y, th = self.pose()
+            c, s = math.cos(th), math.sin(th)
+            front = min(cm.distance_at(x + d * c, y + d * s) for d in (0.1, 0.2, 0.3))
+            back = cm.distance_at(x - 0.1 * c, y - 0.1 * s)
+            if front >= cm.inscribed_m + BACKUP_WHEN_AHEAD_M or back < cm.inscribed_m + BACKUP_CLEAR_M \
+                    or math.hypot(x - x0, y - y0) >= BACKUP_M:
+                break
+            node.command(-BACKUP_SPEED_MPS, 0.0)
+            await self.clock.sleep(self.dt)
+        node.stop()
+        x, y, _ = self.pose()
+        if math.hypot(x - x0, y - y0) > 0.01:
+            node.log.info("backed off from an obstacle", moved_m=round(math.hypot(x - x0, y - y0), 2))
 
     async def _spin(self, angle: float, speed: float) -> None:
         turned, last = 0.0, self.pose()[2]

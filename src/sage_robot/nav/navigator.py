@@ -118,8 +118,8 @@ class NavigatorNode(Node):
         return bool(self.health is not None and self.health.lost)
 
     def command(self, v: float, w: float) -> None:
-        if v < 0.0:
-            raise AssertionError("the navigator never reverses")  # broken code, not bad input
+        if v < 0.0 and not self.settings.robot.allow_reverse:
+            raise AssertionError("the navigator never reverses here")  # broken code, not bad input
         self.commands += 1
         self.bus.publish(topics.CMD_VEL, Twist(float(v), float(w)))
 

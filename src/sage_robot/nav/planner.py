@@ -5,7 +5,9 @@ installed, else scikit-image's ``graph.MCP_Geometric`` (Dijkstra in Cython). A c
 step weight is ``1 + COST_WEIGHT * cost / 252`` (NavFn's cost-aware metric); cells at or
 above ``INSCRIBED`` cannot be entered. Large maps are searched on a coarser grid (each
 planning cell takes the *highest* cost of the fine cells it covers, so a coarse path never
-crosses a wall the fine map has) and the result is smoothed on the fine costmap.
+crosses a wall the fine map has; but a cell with any passable fine cell stays passable, and a
+path through such a cell is found on the fine grid near the coarse one, so pooling never
+closes a gap the robot fits through) and the result is smoothed on the fine costmap.
 
 Conventions: paths are (N, 2) float arrays of map-frame (x, y) in metres; grid axes as in
 :mod:`sage_robot.nav.costmap`.
@@ -17,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from sage_robot.nav.costmap import INSCRIBED, MAX_NON_OBSTACLE, Costmap
 
@@ -25,6 +28,7 @@ MAX_FINE_CELLS = 400_000  # above this many cells, plan on a coarser grid
 PATH_SPACING_M = 0.05  # spacing of the returned path's points (m)
 SMOOTH_ITERATIONS = 2  # line-of-sight shortcut passes
 LINE_CHECK_STEP_CELLS = 0.25  # shortcut lines are checked every quarter cell
+BAND_M = 1.0  # a coarse path through a narrow gap is refined on the fine grid this near it (m)
 GOAL_SEARCH_RADIUS_M = 0.3  # a goal inside an inflated cell moves to the nearest free one within this
 
 
@@ -63,7 +67,9 @@ def _pool_max(cost: np.ndarray, f: int) -> np.ndarray:
 
 
 def weights_from_cost(cost: np.ndarray) -> np.ndarray:
-    w: np.ndarray = 1.0 + COST_WEIGHT * np.minimum(cost, MAX_NON_OBSTACLE).astype(np.float32) / MAX_NON_OBSTACLE
+    w: np.ndarray = (
+        1.0 + COST_WEIGHT * np.minimum(cost, MAX_NON_OBSTACLE).astype(np.float32) / MAX_NON_OBSTACLE
+    )
     w[cost >= INSCRIBED] = np.inf
     return w.astype(np.float32)
 
@@ -146,13 +152,70 @@ def path_length(points: np.ndarray) -> float:
     return float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0
 
 
+def _pool_min(cost: np.ndarray, f: int) -> np.ndarray:
+    """Min-pool ``cost`` by ``f`` (pads with the unknown cost)."""
+    rows, cols = cost.shape
+    padded = np.pad(cost, ((0, -rows % f), (0, -cols % f)), constant_values=255)
+    out: np.ndarray = padded[0::f, 0::f].copy()
+    for i in range(f):
+        for j in range(f):
+            if i or j:
+                np.minimum(out, padded[i::f, j::f], out=out)
+    return out
+
+
+def _fine_in_band(costmap: Costmap, cells: np.ndarray, f: int, start: tuple[float, float],
+                  goal: tuple[float, float]) -> np.ndarray | None:
+    """The fine-grid path from ``start`` to ``goal`` within ``BAND_M`` of a coarse path
+    (``cells``, planning cells of ``f`` fine cells); None when there is none."""
+    g = costmap.geom
+    k = max(1, round(BAND_M / g.resolution))
+    r0 = max(int(cells[:, 0].min()) * f - k, 0)
+    c0 = max(int(cells[:, 1].min()) * f - k, 0)
+    r1 = min((int(cells[:, 0].max()) + 1) * f + k, g.shape[0])
+    c1 = min((int(cells[:, 1].max()) + 1) * f + k, g.shape[1])
+    band = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+    for dr in range(f):
+        for dc in range(f):
+            rr, cc = cells[:, 0] * f + dr - r0, cells[:, 1] * f + dc - c0
+            ok = (rr >= 0) & (rr < band.shape[0]) & (cc >= 0) & (cc < band.shape[1])
+            band[rr[ok], cc[ok]] = True
+    band = ndimage.binary_dilation(band, iterations=k)
+    weights = weights_from_cost(costmap.cost[r0:r1, c0:c1])
+    weights[~band] = np.inf
+    radius = max(1, round(GOAL_SEARCH_RADIUS_M / g.resolution))
+
+    def cell(p: tuple[float, float]) -> tuple[int, int]:
+        rc = g.to_cell(p[0], p[1])
+        return int(rc[0]) - r0, int(rc[1]) - c0
+
+    s, gl = _nearest_free(weights, cell(start), radius + 1), _nearest_free(weights, cell(goal), radius)
+    if s is None or gl is None:
+        return None
+    found = _search(weights, s, gl)
+    if found is None:
+        return None
+    xs, ys = g.to_world(found[:, 0] + r0, found[:, 1] + c0)
+    out: np.ndarray = np.column_stack([xs, ys])
+    return out
+
+
 def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float],
-         max_cells: int = MAX_FINE_CELLS, fine_fallback: bool = True) -> Plan:
+         max_cells: int = MAX_FINE_CELLS, fine_fallback: bool = True, open_pool: bool = True) -> Plan:
     """A smoothed path from ``start`` to ``goal`` (map frame, m). Raises :class:`NoPath`.
-    When the coarse grid finds no way, the fine grid is searched before giving up."""
+
+    On a coarse grid a planning cell that some fine cell inside makes passable stays passable
+    (at the highest non-lethal cost), so pooling never closes a gap the fine grid has open;
+    a coarse path through such a cell is then found on the fine grid within ``BAND_M`` of it
+    (or, failing that, the strict max-pooled grid is searched). When the coarse grid finds no
+    way, the fine grid is searched before giving up."""
     g = costmap.geom
     factor = max(1, math.ceil(math.sqrt(g.shape[0] * g.shape[1] / max_cells)))
     cost = _pool_max(costmap.cost, factor)
+    rescued = None
+    if factor > 1 and open_pool:
+        rescued = (_pool_min(costmap.cost, factor) < INSCRIBED) & (cost >= INSCRIBED)
+        cost = np.where(rescued, np.uint8(MAX_NON_OBSTACLE), cost)
     weights = weights_from_cost(cost)
     res = g.resolution * factor
     radius = max(1, round(GOAL_SEARCH_RADIUS_M / res))
@@ -167,6 +230,15 @@ def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float]
     if gl is None:
         raise NoPath("the goal is inside an obstacle or outside the map")
     cells = _search(weights, s, gl)
+    if cells is not None and rescued is not None and rescued[cells[:, 0], cells[:, 1]].any():
+        fine = _fine_in_band(costmap, cells, factor, start, goal)
+        if fine is None:  # the pooled gap was no gap: plan as before on the strict coarse grid
+            return plan(costmap, start, goal, max_cells, fine_fallback, open_pool=False)
+        fine[0] = start
+        if math.hypot(goal[0] - fine[-1, 0], goal[1] - fine[-1, 1]) <= GOAL_SEARCH_RADIUS_M + g.resolution:
+            fine[-1] = goal
+        fine = smooth(fine, costmap)
+        return Plan(fine, path_length(fine))
     if cells is None:
         if factor > 1 and fine_fallback:
             # a gap narrower than a coarse cell may still be passable: search the fine grid

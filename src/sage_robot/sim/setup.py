@@ -67,7 +67,8 @@ def pose_resolver(places: Places) -> Any:
     return resolve
 
 
-def _walkable_from(grid: OccupancyGrid, raycaster: GridRaycaster, start: tuple[float, float, float]) -> np.ndarray:
+def _walkable_from(grid: OccupancyGrid, raycaster: GridRaycaster,
+                   start: tuple[float, float, float]) -> np.ndarray:
     """Known-free cells a person fits on that connect to the start (the robot's part of the
     building: not the specks and closed-off rooms of a SLAM map); every such cell when the
     start itself is not on one."""

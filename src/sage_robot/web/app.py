@@ -120,7 +120,8 @@ def _add_pages(app: FastAPI) -> None:
             return JSONResponse({"error": "wrong password"}, status_code=401)
         token = st.sessions.create()
         resp = JSONResponse({"ok": True})
-        resp.set_cookie(SESSION_COOKIE, token, httponly=True, samesite="strict", path="/")
+        resp.set_cookie(SESSION_COOKIE, token, httponly=True, samesite="strict", path="/",
+                        secure=request.url.scheme == "https")  # never sent back over plain http
         _log.info("operator logged in", client=key)
         return resp
 

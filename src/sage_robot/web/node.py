@@ -3,7 +3,9 @@
 uvicorn's ``Server.serve()`` runs as a task of the node, so handlers publish on the bus
 directly with no thread hop. The listening socket is bound in ``setup`` (a busy port
 fails the start with a message that names it); ``web.port`` 0 picks a free port, which
-is then in :attr:`WebNode.port` and ``ctx.resources[WEB_URL]``.
+is then in :attr:`WebNode.port` and ``ctx.resources[WEB_URL]``. With HTTPS (``web.tls``,
+:mod:`sage_robot.web.tls`) a second small server on ``web.http_port`` redirects plain http
+to it (its port in :attr:`WebNode.http_port`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from sage_robot.core.errors import ConfigError
 from sage_robot.core.log import RECENT
 from sage_robot.core.node import Node
 from sage_robot.core.resources import ResourceKey
+from sage_robot.web import tls
 
 WS_MAX_MESSAGE_BYTES = 64 * 1024  # larger WebSocket messages close the socket (1009)
 SHUTDOWN_GRACE_S = 1  # open connections get this long to finish on stop (s)
@@ -53,10 +56,12 @@ class WebNode(Node):
             talk_limiter=RateLimiter(web.talk_per_min, TALK_BURST),
         )
         self.app = create_app(self.state)
+        self.tls = tls.tls_enabled(web)
+        cert = await asyncio.to_thread(tls.ensure_certificate, web) if self.tls else None
         self.sock = _bind(web.host, web.port)
         self.port = int(self.sock.getsockname()[1])
         shown = "127.0.0.1" if web.host in ("0.0.0.0", "::") else web.host
-        self.url = f"http://{shown}:{self.port}"
+        self.url = f"{'https' if self.tls else 'http'}://{tls.url_host(shown)}:{self.port}"
         self.ctx.resources[WEB_URL] = self.url
         config = uvicorn.Config(
             self.app,
@@ -66,30 +71,43 @@ class WebNode(Node):
             ws_max_size=WS_MAX_MESSAGE_BYTES,
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
             **proxy_options(web.trusted_proxies),
+            **({"ssl_certfile": str(cert.cert), "ssl_keyfile": str(cert.key)} if cert else {}),
         )
         self.server = _QuietServer(config)
         self._serve_task = self.spawn(self.server.serve(sockets=[self.sock]), "web.server")
-        self.log.info("web server listening", url=self.url)
+        self.http_port: int | None = None
+        if self.tls and web.http_port is not None:
+            self._start_redirect(web.host, 0 if web.port == 0 else web.http_port)
+        self.log.info("web server listening", url=self.url, http_redirect_port=self.http_port)
+
+    def _start_redirect(self, host: str, port: int) -> None:
+        """Plain http on ``port`` → 308 to HTTPS. A busy port is a warning: the pages still work."""
+        try:
+            self.redirect_sock = _bind(host, port)
+        except ConfigError as exc:
+            self.log.warning("no plain-http redirect", error=str(exc).replace("web.port", "web.http_port"))
+            return
+        self.http_port = int(self.redirect_sock.getsockname()[1])
+        app = tls.RedirectToHttps(self.port, tls.public_host(self.settings.web))
+        config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off",
+                                timeout_graceful_shutdown=SHUTDOWN_GRACE_S, proxy_headers=False)
+        self.redirect_server = _QuietServer(config)
+        self._redirect_task = self.spawn(self.redirect_server.serve(sockets=[self.redirect_sock]),
+                                         "web.http_redirect")
 
     async def teardown(self) -> None:
-        server, task = getattr(self, "server", None), getattr(self, "_serve_task", None)
-        if server is not None:
-            server.should_exit = True  # closes sockets (1012) and open connections
-        if task is not None and not task.done():
-            with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
-                await asyncio.wait_for(asyncio.shield(task), SHUTDOWN_GRACE_S + 1.0)
-        for listener in getattr(server, "servers", []):  # a serve task that died (crash, cancel)
-            listener.close()  # left its listener in the loop; a new socket could reuse its fd
+        await _stop_server(getattr(self, "redirect_server", None), getattr(self, "_redirect_task", None))
+        await _stop_server(getattr(self, "server", None), getattr(self, "_serve_task", None))
         hub = getattr(self, "hub", None)
         if hub is not None:
             hub.stop()
         teleop = getattr(self, "teleop", None)
         if teleop is not None and teleop.command != (0.0, 0.0):
             teleop._publish(0.0, 0.0)
-        sock = getattr(self, "sock", None)
-        if sock is not None:
-            with contextlib.suppress(OSError):
-                sock.close()
+        for sock in (getattr(self, "sock", None), getattr(self, "redirect_sock", None)):
+            if sock is not None:
+                with contextlib.suppress(OSError):
+                    sock.close()
 
     def stats(self) -> dict[str, Any]:
         hub, teleop = getattr(self, "hub", None), getattr(self, "teleop", None)
@@ -100,6 +118,16 @@ class WebNode(Node):
             **(teleop.counts if teleop else {}),
             "estop": bool(hub.estop) if hub else False,
         }
+
+
+async def _stop_server(server: uvicorn.Server | None, task: asyncio.Task[Any] | None) -> None:
+    if server is not None:
+        server.should_exit = True  # closes sockets (1012) and open connections
+    if task is not None and not task.done():
+        with contextlib.suppress(asyncio.TimeoutError, asyncio.CancelledError, Exception):
+            await asyncio.wait_for(asyncio.shield(task), SHUTDOWN_GRACE_S + 1.0)
+    for listener in getattr(server, "servers", []):  # a serve task that died (crash, cancel)
+        listener.close()  # left its listener in the loop; a new socket could reuse its fd
 
 
 def proxy_options(trusted_proxies: tuple[str, ...]) -> dict[str, Any]:

@@ -4,6 +4,9 @@
 - ``POST /api/talk/audio`` (multipart field ``audio``: the browser's MediaRecorder WebM)
   → ffmpeg → 16 kHz → speech to text → the brain → ``{"transcript", "reply"}``.
 - ``POST /api/talk/say`` ``{"text": "..."}`` → the reply spoken, as ``audio/wav``.
+- ``GET /api/talk_url`` → ``{"url", "secure"}``: the address of ``/talk`` for a phone (HTTPS
+  at the robot's network address when TLS is on); ``GET /api/talk_qr.svg``: it as a QR code
+  (the kiosk face shows it).
 
 The brain is reached through the ``converse`` action; voice through
 ``sage_robot.voice`` imported on first use. A missing part gives a 503 that names it
@@ -14,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 from typing import Any
+from urllib.parse import urlsplit
 
 from fastapi import APIRouter, HTTPException, Request, UploadFile
 from fastapi.responses import Response
@@ -23,6 +27,7 @@ from sage_robot.core.actions import GoalTimeout
 from sage_robot.core.errors import SageError
 from sage_robot.core.log import get_logger
 from sage_robot.core.msgs import Text
+from sage_robot.web import tls
 from sage_robot.web.common import client_key, json_body, state_of
 
 router = APIRouter()
@@ -122,3 +127,45 @@ async def talk_say(request: Request) -> Response:
     except (SageError, ImportError, OSError) as exc:
         raise HTTPException(status_code=503, detail=f"text to speech failed: {exc}") from None
     return Response(audio_io.wav_bytes(pcm, rate), media_type="audio/wav")
+
+
+def talk_url(request: Request) -> str:
+    """``/talk`` as a phone on the robot's network reaches it: ``web.public_host``, else the
+    address this request came to when that is not loopback, else the robot's first LAN address."""
+    node = state_of(request).node
+    web = node.settings.web
+    host = web.public_host
+    if not host:
+        asked = urlsplit(f"//{request.headers.get('host', '')}").hostname or ""
+        host = asked if asked and not tls.is_loopback(asked) else tls.public_host(web)
+    secure = bool(getattr(node, "tls", False))
+    port = int(getattr(node, "port", web.port))
+    scheme, default = ("https", 443) if secure else ("http", 80)
+    return f"{scheme}://{tls.url_host(host)}{'' if port == default else f':{port}'}/talk"
+
+
+def qr_svg(text: str) -> str:
+    """``text`` as an SVG QR code (black on white, quiet zone included)."""
+    import io
+
+    import segno
+
+    out = io.BytesIO()
+    segno.make(text, error="m", micro=False).save(
+        out, kind="svg", scale=8, border=4, dark="#000", light="#fff", xmldecl=False,
+        title="QR code: " + text,
+    )
+    return out.getvalue().decode()
+
+
+@router.get("/api/talk_url")
+async def talk_address(request: Request) -> dict[str, Any]:
+    url = talk_url(request)
+    return {"url": url, "secure": url.startswith("https://")}
+
+
+@router.get("/api/talk_qr.svg")
+async def talk_qr(request: Request) -> Response:
+    url = talk_url(request)
+    return Response(qr_svg(url), media_type="image/svg+xml",
+                    headers={"Cache-Control": "no-cache", "X-Talk-URL": url})

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from sage_robot.core.config.base import Section
 
@@ -206,6 +206,31 @@ class WebSettings(Section):
         description="Addresses (or CIDR networks) of reverse proxies whose X-Forwarded-For / "
         "X-Forwarded-Proto are believed; empty = none (the socket's peer address counts).",
     )
+    tls: Literal["auto", "on", "off"] = Field(
+        "auto",
+        description="HTTPS on web.port: 'on', 'off', or 'auto' = on unless web.host is loopback "
+        "(phones need https for the microphone; localhost is secure already).",
+    )
+    tls_cert: str = Field(
+        "", description="The operator's PEM certificate (chain); empty = one made on first run."
+    )
+    tls_key: str = Field("", description="Its PEM private key (goes with tls_cert).")
+    http_port: int | None = Field(
+        8080, ge=0, lt=65536,
+        description="With HTTPS: plain-http port that redirects to it (path and query kept); "
+        "0 = any free (also when web.port is 0); null = none.",
+    )
+    public_host: str = Field(
+        "", description="Name or address phones use for the robot (talk QR code); empty = its LAN address."
+    )
+
+    @field_validator("tls", mode="before")
+    @classmethod
+    def _yaml_on_off(cls, value: object) -> object:
+        """YAML reads a bare on/off as true/false."""
+        if isinstance(value, bool):
+            return "on" if value else "off"
+        return value
 
 
 class EmailSettings(Section):

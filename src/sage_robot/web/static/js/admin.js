@@ -1,18 +1,20 @@
 // Admin: knowledge base, places (list, add at the robot or a clicked point), node health, logs.
 import { $, api, checkLogin, el, healthRows, LiveSocket } from "./common.js";
 import { LiveMap } from "./livemap.js";
+import { loadPlaces as fetchPlaces } from "./places.js";
 
 const REFRESH_MS = 3000;
 
 async function loadPlaces() {
-  const { ok, data } = await api("/api/admin/places");
-  if (!ok) return;
+  const places = await fetchPlaces("/api/admin/places");
+  if (!places) return;
   const body = $("places");
   body.replaceChildren();
-  for (const p of data.places) {
-    body.append(el("tr", {}, el("td", {}, p.name), el("td", { class: "nowrap" }, `${p.x.toFixed(2)}, ${p.y.toFixed(2)}`),
-      el("td", {}, p.description)));
+  for (const p of places) { // the human title; the code name in its tooltip
+    body.append(el("tr", { "data-place": p.name }, el("td", { title: p.name }, p.title),
+      el("td", { class: "nowrap" }, `${p.x.toFixed(2)}, ${p.y.toFixed(2)}`), el("td", {}, p.description)));
   }
+  map.setPlaces(places);
 }
 
 async function addPlace(extra) {

@@ -93,7 +93,12 @@ export class Drive {
       const r = wheel.getBoundingClientRect();
       return (Math.atan2(e.clientY - (r.top + r.height / 2), e.clientX - (r.left + r.width / 2)) * 180) / Math.PI;
     };
-    const show = () => (wheel.style.transform = `rotate(${this.wheelDeg}deg)`);
+    const show = () => {
+      wheel.style.transform = `rotate(${this.wheelDeg}deg)`;
+      const deg = Math.round(this.wheelDeg);
+      wheel.setAttribute("aria-valuenow", String(deg));
+      wheel.setAttribute("aria-valuetext", deg === 0 ? "straight" : `${Math.abs(deg)}° ${deg > 0 ? "right" : "left"}`);
+    };
     wheel.addEventListener("pointerdown", (e) => {
       wheel.setPointerCapture(e.pointerId);
       start = { a: angleOf(e), deg: this.wheelDeg };
@@ -121,6 +126,7 @@ export class Drive {
     const set = (on) => {
       this[field] = on;
       pedal.classList.toggle("pressed", on);
+      pedal.setAttribute("aria-pressed", String(on));
       this.update();
     };
     pedal.addEventListener("pointerdown", (e) => {

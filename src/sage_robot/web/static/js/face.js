@@ -100,6 +100,18 @@ api("/api/health").then(({ ok, data }) => {
   });
 });
 
+// ---------------------------------------------------------------- scan to talk
+// The server draws /talk's address (https at the robot's network address) as a QR code.
+api("/api/talk_url").then(({ ok, data }) => {
+  if (!ok || !data.url) return;
+  const img = $("talk-qr-img");
+  img.onload = () => ($("talk-qr").hidden = false);
+  img.alt = `QR code: ${data.url}`;
+  img.src = "/api/talk_qr.svg";
+  $("talk-url").textContent = data.url.replace(/^https?:\/\//, "");
+  document.body.dataset.talkUrl = data.url;
+});
+
 lookAt(180);
 setMouth(0);
 blinkLoop();

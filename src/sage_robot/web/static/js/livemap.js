@@ -1,7 +1,9 @@
-// The live map: map image, robot, lidar points, plan, goal, people, localization health.
+// The live map: map image, robot, lidar points, plan, goal, places, people, localization health.
 // World frame: metres, x right, y up (map_server). The map image's top row is the highest y.
 // Click (press and release without moving) -> onClick(x, y);
 // drag -> onDrag(x, y, theta): a pose at the press point facing the release point.
+// The goal marker shows every goal, whoever set it: a pose goal from /goal_pose, a place
+// goal from /nav/state's place (drawn at that place, with its title).
 
 const DRAG_PX = 8; // a press that moves farther than this is a drag, not a click
 const ROBOT_RADIUS_M = 0.25;
@@ -14,9 +16,12 @@ export class LiveMap {
     this.onDrag = onDrag;
     this.meta = null; // {width, height, resolution, origin, version}
     this.image = null;
-    this.layers = { pose: null, scan: [], plan: [], goal: null, people: [], loc: null };
+    this.layers = { pose: null, scan: [], plan: [], goal: null, people: [], loc: null, navPlace: "" };
+    this.places = []; // [{name, title, x, y}] from setPlaces()
+    this.pending = null; // a pose waiting for the operator's confirmation (drawn as a ghost robot)
+    this.dragColor = "#3fb950";
     this.press = null;
-    this.pending = false;
+    this.drawQueued = false;
     canvas.addEventListener("pointerdown", (e) => this.down(e));
     canvas.addEventListener("pointerup", (e) => this.up(e));
     canvas.addEventListener("pointermove", (e) => this.move(e));
@@ -47,9 +52,24 @@ export class LiveMap {
       case "loc":
         this.layers.loc = msg;
         break;
+      case "nav":
+        this.layers.navPlace = msg.done ? "" : msg.place || "";
+        break;
       default:
         return;
     }
+    this.redraw();
+  }
+
+  /** Places to draw (a dot and the title) and to mark when navigation goes to one. */
+  setPlaces(places) {
+    this.places = places || [];
+    this.redraw();
+  }
+
+  /** A pose to draw as a ghost robot while it waits for a confirmation (null: none). */
+  setPending(pose) {
+    this.pending = pose;
     this.redraw();
   }
 
@@ -84,10 +104,10 @@ export class LiveMap {
   }
 
   redraw() {
-    if (this.pending) return;
-    this.pending = true;
+    if (this.drawQueued) return;
+    this.drawQueued = true;
     requestAnimationFrame(() => {
-      this.pending = false;
+      this.drawQueued = false;
       this.draw();
     });
   }
@@ -126,8 +146,18 @@ export class LiveMap {
       });
       g.stroke();
     }
-    if (L.goal) {
-      const [px, py] = this.toPx(L.goal.x, L.goal.y, v);
+    g.font = "12px system-ui";
+    for (const p of this.places) {
+      const [px, py] = this.toPx(p.x, p.y, v);
+      g.fillStyle = "#a371f7";
+      g.beginPath();
+      g.arc(px, py, 4, 0, 2 * Math.PI);
+      g.fill();
+      this.label(p.title || p.name, px + 6, py - 6);
+    }
+    const goal = L.goal || this.placeGoal();
+    if (goal) {
+      const [px, py] = this.toPx(goal.x, goal.y, v);
       g.strokeStyle = "#3fb950";
       g.lineWidth = 3;
       g.beginPath();
@@ -137,7 +167,10 @@ export class LiveMap {
       g.moveTo(px, py - 12);
       g.lineTo(px, py + 12);
       g.stroke();
+      if (goal.theta != null) this.arrow(px, py, px + 22 * Math.cos(goal.theta), py - 22 * Math.sin(goal.theta), "#3fb950");
+      if (goal.title) this.label(`goal: ${goal.title}`, px + 12, py + 18);
     }
+    if (this.pending) this.drawRobot(this.pending, v, "rgba(242, 183, 5, 0.45)");
     g.fillStyle = "#ff9f0a";
     for (const [x, y] of L.people) {
       const [px, py] = this.toPx(x, y, v);
@@ -161,24 +194,49 @@ export class LiveMap {
       g.fillText(`robot drawn from ${L.pose.frame} (not localized on the map)`, 8, 36);
     }
     if (this.press && this.press.dragging) {
-      const [x1, y1] = [this.press.px, this.press.py], [x2, y2] = [this.press.qx, this.press.qy];
-      g.strokeStyle = "#f2b705";
-      g.lineWidth = 2;
-      g.beginPath();
-      g.moveTo(x1, y1);
-      g.lineTo(x2, y2);
-      g.stroke();
+      this.arrow(this.press.px, this.press.py, this.press.qx, this.press.qy, this.dragColor);
     }
   }
 
-  drawRobot(p, v) {
+  /** The place navigation is going to (from /nav/state), as a goal marker. */
+  placeGoal() {
+    const name = this.layers.navPlace;
+    if (!name) return null;
+    const p = this.places.find((q) => q.name === name);
+    return p ? { x: p.x, y: p.y, theta: p.theta, title: p.title || p.name } : null;
+  }
+
+  label(text, x, y) {
+    const g = this.ctx;
+    const w = g.measureText(text).width;
+    g.fillStyle = "rgba(16, 21, 28, 0.75)";
+    g.fillRect(x - 2, y - 11, w + 4, 15);
+    g.fillStyle = "#e8eef5";
+    g.fillText(text, x, y);
+  }
+
+  arrow(x1, y1, x2, y2, color) {
+    const g = this.ctx;
+    const a = Math.atan2(y2 - y1, x2 - x1);
+    g.strokeStyle = color;
+    g.lineWidth = 2;
+    g.beginPath();
+    g.moveTo(x1, y1);
+    g.lineTo(x2, y2);
+    g.lineTo(x2 - 10 * Math.cos(a - 0.4), y2 - 10 * Math.sin(a - 0.4));
+    g.moveTo(x2, y2);
+    g.lineTo(x2 - 10 * Math.cos(a + 0.4), y2 - 10 * Math.sin(a + 0.4));
+    g.stroke();
+  }
+
+  drawRobot(p, v, fill = "#f2b705") {
     const g = this.ctx;
     const [px, py] = this.toPx(p.x, p.y, v);
     const r = Math.max(7, ROBOT_RADIUS_M * v.scale);
     g.save();
     g.translate(px, py);
     g.rotate(-p.theta);
-    g.fillStyle = "#f2b705";
+    g.fillStyle = fill;
     g.strokeStyle = "#000";
     g.beginPath();
     g.moveTo(r * 1.4, 0);

@@ -115,6 +115,39 @@ async function upload(stream) {
 }
 
 const ptt = $("ptt");
+
+// ---------------------------------------------------------------- no microphone here: say so first
+// Browsers give a page the microphone only in a secure context (https, or localhost). On the
+// robot's plain-http address hold-to-talk cannot work: hide it and point to the https address.
+export function micAvailable() {
+  return Boolean(window.isSecureContext && navigator.mediaDevices?.getUserMedia && window.MediaRecorder);
+}
+
+function noMicrophone() {
+  ptt.hidden = true;
+  ptt.disabled = true;
+  document.body.dataset.mic = "unavailable";
+  const note = $("mic-note");
+  note.hidden = false;
+  const hint = document.querySelector(".hint");
+  if (hint) hint.textContent = "Ask about the building, its labs and where things are — or ask me to take you somewhere.";
+  if (window.isSecureContext) {
+    note.textContent = "This browser cannot record sound here; you can type instead.";
+    return;
+  }
+  note.textContent = "Voice needs a secure https:// address, which this robot does not offer; you can type instead.";
+  api("/api/talk_url").then(({ ok, data }) => {
+    if (!ok || !data.secure || !data.url) return;
+    const secure = new URL(data.url);
+    secure.hostname = location.hostname; // the same robot, by the name this phone already uses
+    const link = el("a", { href: secure.href }, secure.href);
+    note.replaceChildren("Voice needs the secure address ", link, "; you can type instead.");
+  });
+}
+
+if (micAvailable()) document.body.dataset.mic = "available";
+else noMicrophone();
+
 ptt.addEventListener("pointerdown", (e) => {
   e.preventDefault();
   holding = true;

@@ -2,6 +2,7 @@
 import { $, api, batteryText, checkLogin, el, LiveSocket } from "./common.js";
 import { Drive } from "./drive.js";
 import { LiveMap } from "./livemap.js";
+import { loadPlaces as fetchPlaces } from "./places.js";
 
 const CONFIRM_WINDOW_MS = 5000; // the "confirm release" button stays this long
 const MAX_EVENTS = 200;
@@ -12,6 +13,8 @@ let estop = false;
 const teleop = new LiveSocket("/ws/teleop", {
   onState: (up) => {
     $("link").classList.toggle("up", up);
+    $("link").setAttribute("aria-label", `control link: ${up ? "up" : "down"}`);
+    announce(up ? "control link up" : "control link down");
     if (!up) checkLogin();
   },
   onMessage: (msg) => {
@@ -20,6 +23,14 @@ const teleop = new LiveSocket("/ws/teleop", {
     else if (msg.type === "deadman") logEvent("teleop", msg.message);
   },
 });
+/** Say it to screen readers (a polite live region; only changes, not every update). */
+let lastAnnounced = "";
+function announce(text) {
+  if (text === lastAnnounced) return;
+  lastAnnounced = text;
+  $("announce").textContent = text;
+}
+
 const drive = new Drive(teleop, {
   onCommand: (m) => ($("cmd").textContent = `${m.x.toFixed(2)}, ${m.z.toFixed(2)}`),
 });
@@ -31,6 +42,7 @@ drive.bindJoystick($("joystick"), $("knob"));
 $("reverse").addEventListener("click", () => {
   drive.reverse = !drive.reverse;
   $("reverse").textContent = `R: ${drive.reverse ? "on" : "off"}`;
+  $("reverse").setAttribute("aria-pressed", String(drive.reverse));
 });
 $("speed").addEventListener("input", () => {
   drive.maxSpeed = Number($("speed").value);
@@ -38,6 +50,7 @@ $("speed").addEventListener("input", () => {
 });
 
 function showEstop(engaged) {
+  if (engaged !== estop) announce(engaged ? "E-stop engaged: the robot will not move" : "E-stop released");
   estop = engaged;
   document.body.dataset.estop = String(engaged);
   $("estop").classList.toggle("engaged", engaged);
@@ -74,16 +87,60 @@ new LiveSocket("/ws/camera", {
 });
 
 // ---------------------------------------------------------------- live map and status
+// Two explicit tools: "go here" (click: drive there facing the way from the robot; drag:
+// drive there facing the drag's direction) and "set pose" (press at the robot, drag along its
+// heading, then confirm): a drag never resets localization by itself.
 async function goTo(body, label) {
   const { ok, data } = await api("/api/goal", body);
   $("goal-msg").textContent = ok ? `going to ${label}` : data.error;
 }
+const deg = (theta) => `${Math.round((theta * 180) / Math.PI)}°`;
+const at = (x, y) => `(${x.toFixed(1)}, ${y.toFixed(1)})`;
+const tool = () => document.querySelector("input[name=tool]:checked").value;
+let robotPose = null;
+let pendingPose = null;
+
+function goHere(x, y, theta) {
+  if (theta == null) { // a click: face the way the robot drives there
+    theta = robotPose ? Math.atan2(y - robotPose.y, x - robotPose.x) : 0;
+  }
+  goTo({ x, y, theta }, `${at(x, y)} facing ${deg(theta)}`);
+}
+function askPose(x, y, theta) {
+  pendingPose = { x, y, theta };
+  map.setPending(pendingPose);
+  $("pose-text").textContent = `${at(x, y)} facing ${deg(theta)}`;
+  $("pose-confirm").hidden = false;
+  $("pose-yes").focus();
+}
+function clearPose() {
+  pendingPose = null;
+  map.setPending(null);
+  $("pose-confirm").hidden = true;
+}
 const map = new LiveMap($("map"), {
-  onClick: (x, y) => goTo({ x, y, theta: 0 }, `(${x.toFixed(1)}, ${y.toFixed(1)})`),
-  onDrag: async (x, y, theta) => {
-    const { ok, data } = await api("/api/initial_pose", { x, y, theta });
-    $("goal-msg").textContent = ok ? `pose set to (${x.toFixed(1)}, ${y.toFixed(1)})` : data.error;
+  onClick: (x, y) => {
+    if (tool() === "goal") goHere(x, y, null);
+    else askPose(x, y, robotPose ? robotPose.theta : 0);
   },
+  onDrag: (x, y, theta) => (tool() === "goal" ? goHere(x, y, theta) : askPose(x, y, theta)),
+});
+for (const input of document.querySelectorAll("input[name=tool]")) {
+  input.addEventListener("change", () => {
+    map.dragColor = tool() === "goal" ? "#3fb950" : "#f2b705";
+    if (tool() === "goal") clearPose();
+  });
+}
+$("pose-yes").addEventListener("click", async () => {
+  const pose = pendingPose;
+  clearPose();
+  if (!pose) return;
+  const { ok, data } = await api("/api/initial_pose", pose);
+  $("goal-msg").textContent = ok ? `pose set to ${at(pose.x, pose.y)} facing ${deg(pose.theta)}` : data.error;
+});
+$("pose-no").addEventListener("click", () => {
+  clearPose();
+  $("goal-msg").textContent = "pose not changed";
 });
 
 window.sageMap = map; // for debugging from the console (and the browser tests)
@@ -98,6 +155,9 @@ new LiveSocket("/ws/live", {
   onMessage: (msg) => {
     map.update(msg);
     switch (msg.type) {
+      case "pose":
+        robotPose = msg;
+        break;
       case "battery":
         $("battery").textContent = batteryText(msg);
         break;
@@ -126,7 +186,8 @@ new LiveSocket("/ws/live", {
 let lastNav = "";
 function showNav(msg) {
   const state = msg.state.replaceAll("_", " ");
-  const parts = [msg.place ? `${state} → ${msg.place}` : state];
+  const title = placeTitle(msg.place);
+  const parts = [msg.place ? `${state} → ${title}` : state];
   if (!msg.done && msg.distance_remaining_m > 0) {
     parts.push(`${msg.distance_remaining_m.toFixed(1)} m left`);
     if (msg.eta_s) parts.push(`ETA ${formatEta(msg.eta_s)}`);
@@ -135,8 +196,10 @@ function showNav(msg) {
   const text = parts.join(" · ");
   $("nav").textContent = text;
   $("nav").dataset.state = msg.state;
+  $("nav").title = msg.place || "";
   const key = `${msg.state} ${msg.place}`;
-  if (key !== lastNav && msg.state !== "idle") logEvent("navigation", msg.done ? text : `${state} ${msg.place || ""}`);
+  if (key !== lastNav && msg.state !== "idle") logEvent("navigation", msg.done ? text : `${state} ${title}`);
+  if (key !== lastNav) announce(`navigation: ${msg.place ? `${state} → ${title}` : state}`);
   lastNav = key;
 }
 function formatEta(s) {
@@ -144,13 +207,19 @@ function formatEta(s) {
   return m ? `${m} min ${Math.round(s % 60)} s` : `${Math.round(s)} s`;
 }
 
+let titles = new Map(); // code name -> human title
+const placeTitle = (name) => titles.get(name) || name || "";
+
 async function loadPlaces() {
-  const { ok, data } = await api("/api/places");
+  const places = await fetchPlaces();
   const box = $("places");
   box.replaceChildren();
-  if (!ok) return;
-  for (const p of data.places) {
-    box.append(el("button", { title: p.description, onclick: () => goTo({ place: p.name }, p.name) }, p.name));
+  if (!places) return;
+  titles = new Map(places.map((p) => [p.name, p.title]));
+  map.setPlaces(places);
+  for (const p of places) {
+    const tip = `${p.name}${p.description ? ` — ${p.description}` : ""}`;
+    box.append(el("button", { title: tip, "data-place": p.name, onclick: () => goTo({ place: p.name }, p.title) }, p.title));
   }
 }
 $("cancel").addEventListener("click", async () => {
