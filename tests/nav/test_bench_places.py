@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sage_robot.bench import nav as bench_nav
-from sage_robot.bench import nav_places as npl
+import sage_robot.bench.nav as bench_nav
+import sage_robot.bench.nav_places as npl
 from sage_robot.core.config import Settings
 from sage_robot.core.mapio import FREE, OCCUPIED, UNKNOWN
 from sage_robot.core.msgs import Event, OccupancyGrid, Pose2D
@@ -181,3 +181,21 @@ def test_boxes_on_willow_keep_paths_between_all_places(shared_data: Callable[[st
         assert not space.blocked[cells[:, 0], cells[:, 1]].any()  # on free floor, not in a wall
         blocked[cells[:, 0], cells[:, 1]] = True
     assert npl.connected(space, RADIUS, pts, blocked)
+
+
+def test_summary_counts_waiting_excuse_me_and_arrivals_short_of_the_goal() -> None:
+    def leg(ok: bool, reason: str = "", waited: float = 0.0, excuse: int = 0) -> dict[str, object]:
+        return {"from": "A", "to": "B", "ok": ok, "reason": reason, "collisions": 0, "time_s": 10.0,
+                "length_m": 5.0, "shortest_m": 5.0, "loc_samples": 0, "loc_sq_m": 0.0, "loc_sq_deg": 0.0,
+                "waited_s": waited, "excuse_me": excuse}
+
+    out = bench_nav.summarize([
+        leg(True, waited=2.5, excuse=1),
+        leg(False, f"{bench_nav.SAID_ARRIVED} 2.1 m from the goal (stopped short)", 60.0, 2),
+        leg(False, "the way is blocked"),
+        {k: v for k, v in leg(True).items() if k not in ("waited_s", "excuse_me")},  # an older legs file
+    ])
+    assert out["time_waiting_s"] == 62.5
+    assert out["excuse_me"] == 3
+    assert out["arrived_short"] == 1
+    assert out["success_rate"] == 0.5

@@ -152,3 +152,77 @@ def test_a_box_seen_by_the_scan_costs_but_does_not_close_a_gap() -> None:
     people = [(6.0, 1.5, 0.25)]
     cm2.update_scan((3.0, 1.5, 0.0), angles, cast(mapped, (3.0, 1.5, 0.0), angles, people), 12.0)
     assert cm2.cost_at(6.0 - 0.25 - 0.25 - 0.15, 1.5)[()] >= INSCRIBED
+
+
+class _Host:
+    """Just enough of a navigator for one recovery: a robot on a costmap that moves as told."""
+
+    def __init__(self, cm, pose, allow_reverse: bool) -> None:
+        from sage_robot.core.clock import SimClock
+        from sage_robot.core.config import Settings
+
+        self.settings = Settings.model_validate({"robot": {"allow_reverse": allow_reverse}})
+        self.clock = SimClock()
+        self.local_cm = self.global_cm = cm
+        self._pose = pose
+        self.cmds: list[tuple[float, float]] = []
+
+    def pose(self):
+        return self._pose
+
+    def command(self, v: float, w: float) -> None:
+        self.cmds.append((v, w))
+        x, y, th = self._pose
+        dt = 0.05
+        self._pose = (x + v * dt * math.cos(th), y + v * dt * math.sin(th), th + w * dt)
+
+    def stop(self) -> None:
+        pass
+
+    @property
+    def log(self):
+        import logging
+
+        class _Log:
+            def info(self, *_a, **_k) -> None:
+                logging.getLogger("test").info("%s", _a)
+
+        return _Log()
+
+
+@pytest.mark.parametrize("allow_reverse", [False, True])
+async def test_backs_off_from_an_obstacle_in_front_only_where_allowed(allow_reverse) -> None:
+    from sage_robot.nav.costmap import Costmap
+    from sage_robot.nav.drive import BACKUP_M, GoalRun, Target
+
+    g = room(6.0, 3.0, RES)
+    _box(g, 3.0, 0.0, 3.4, 3.0)  # a wall across, 0.35 m in front of the robot's centre
+    cm = Costmap.from_grid(g, 0.25, 0.55, 3.0)
+    host = _Host(cm, (2.65, 1.5, 0.0), allow_reverse)
+    run = GoalRun(host, Target("", "the goal", (1.0, 1.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type]
+    host.clock.sleep = _advance(host.clock)  # type: ignore[method-assign]
+    await run._back_off()
+    if not allow_reverse:
+        assert not any(v < 0 for v, _ in host.cmds)
+        return
+    backed = 2.65 - host.pose()[0]
+    assert 0.05 < backed <= BACKUP_M + 0.01
+    assert all(v <= 0 and w == 0 for v, w in host.cmds)
+
+
+def _advance(clock):
+    async def sleep(dt: float) -> None:
+        clock._now += dt  # a bare SimClock that nobody steps: the test advances it
+
+    return sleep
+
+
+def test_unknown_speckles_in_free_space_do_not_block_but_unexplored_space_does() -> None:
+    from sage_robot.nav.costmap import INSCRIBED, NO_INFORMATION, Costmap
+
+    g = room(6.0, 3.0, RES)
+    g.data[30, 60] = g.data[31, 61] = -1  # two unseen pixels of a SLAM map in the middle of a room
+    g.data[5:25, 90:115] = -1  # 1 m x 1.25 m never seen (a room behind a closed door)
+    cm = Costmap.from_grid(g, 0.25, 0.55, 3.0)
+    assert cm.cost_at(3.025, 1.525)[()] < INSCRIBED
+    assert cm.cost_at(5.0, 0.7)[()] == NO_INFORMATION

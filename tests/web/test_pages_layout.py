@@ -89,10 +89,10 @@ def test_no_page_scrolls_sideways(context: Any, robot: Any, shots: Path, name: s
         page.close()
 
 
-def test_estop_always_fully_visible(context: Any, robot: Any, shots: Path) -> None:
+def test_estop_always_fully_visible(context: Any, robot: Any) -> None:
     page = open_page(context, robot, "teleop")
     try:
-        for size, (w, h) in SIZES.items():
+        for w, h in SIZES.values():
             page.set_viewport_size({"width": w, "height": h})
             for where in ("top", "bottom"):
                 page.evaluate("window.scrollTo(0, 0)" if where == "top" else
@@ -117,7 +117,7 @@ def test_estop_banner_overlays_instead_of_pushing_the_page(context: Any, robot: 
         top_before = page.evaluate("document.querySelector('main').getBoundingClientRect().top")
         robot.run(teleop.set_estop(True, "layout test"))
         page.wait_for_selector("#estop-banner.show", timeout=WAIT_MS)
-        page.wait_for_selector("#announce:has-text('E-stop engaged')", state="attached", timeout=WAIT_MS)
+        assert page.get_attribute("#estop-banner", "role") == "alert"  # screen readers say it at once
         page.evaluate(SETTLE)
         top_after = page.evaluate("document.querySelector('main').getBoundingClientRect().top")
         assert top_after == top_before, f"the banner pushed the page down {top_after - top_before} px"
@@ -144,6 +144,11 @@ def test_places_show_human_titles(context: Any, robot: Any) -> None:
         for code, text, tip in buttons:
             assert "_" not in text, f"{code} shows its code name: {text!r}"
             assert tip.startswith(code), tip
+        names = page.evaluate("""import('/static/js/places.js').then((m) => [
+            m.humanName('GUELLY_DELLY'), m.humanName('ECE_LAB_1'), m.humanName('3D_PRINTING_LAB'),
+            m.kbPlaceTitle('Guelly Delly café (GUELLY_DELLY)'), m.kbPlaceTitle('Opening hours')])""")
+        kb_pair = ["GUELLY_DELLY", "Guelly Delly café"]
+        assert names == ["Guelly Delly", "ECE Lab 1", "3D Printing Lab", kb_pair, None]
     finally:
         page.close()
 
@@ -171,7 +176,9 @@ def axe() -> Path:
 
 
 @pytest.mark.parametrize("name", list(PAGES))
-def test_no_serious_accessibility_violations(context: Any, robot: Any, shots: Path, axe: Path, name: str) -> None:
+def test_no_serious_accessibility_violations(
+    context: Any, robot: Any, shots: Path, axe: Path, name: str
+) -> None:
     page = open_page(context, robot, name)
     try:
         if name in ("teleop", "admin"):  # the places (titles) have arrived
@@ -206,3 +213,95 @@ def test_kb_admin_page_is_styled_with_a_way_back(context: Any, robot: Any, shots
     (shots / "axe-kb-admin.json").write_text(json.dumps(found, indent=1))
     blocking = [v for v in found if v["impact"] in BLOCKING]
     assert not blocking, f"/kb/admin: {json.dumps(blocking, indent=1)}"
+
+
+# ---------------------------------------------------------------- the teleop map's tools
+# Records the page's API calls (path and JSON body), to see what a gesture on the map sent.
+FETCH_PROBE = """
+(() => {
+  const native = window.fetch;
+  window.sageCalls = [];
+  window.fetch = (path, opts = {}) => {
+    window.sageCalls.push({ path: String(path), body: opts.body ? JSON.parse(opts.body) : null });
+    return native(path, opts);
+  };
+})();
+"""
+
+
+def sent(page: Any, path: str) -> list[dict[str, Any]]:
+    calls: list[dict[str, Any]] = page.evaluate("window.sageCalls")
+    return [c["body"] for c in calls if c["path"] == path]
+
+
+def test_go_here_drag_sets_the_heading_and_never_the_pose(context: Any, robot: Any, shots: Path) -> None:
+    import math
+
+    page = context.new_page()
+    page.add_init_script(FETCH_PROBE)
+    page.goto(f"{robot.url}/teleop")
+    try:
+        page.wait_for_selector("#map[data-map-version]", timeout=WAIT_MS)
+        page.locator("#map").scroll_into_view_if_needed()
+        box = page.locator("#map").bounding_box()
+        assert box is not None
+        x0, y0 = box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5
+        page.mouse.move(x0, y0)  # "go here" is the default tool
+        page.mouse.down()
+        page.mouse.move(x0, y0 - 60, steps=5)  # drag upwards: face +y (90°)
+        page.mouse.up()
+        page.wait_for_function("window.sageCalls.some((c) => c.path === '/api/goal')", timeout=WAIT_MS)
+        goal = sent(page, "/api/goal")[-1]
+        assert abs(math.remainder(goal["theta"] - math.pi / 2, 2 * math.pi)) < 0.1, goal
+        assert sent(page, "/api/initial_pose") == [], "a drag in 'go here' must not set the pose"
+        page.click("#cancel")
+        # "set pose": a drag asks first; Cancel sends nothing
+        page.check("input[name=tool][value=pose]")
+        page.mouse.move(x0, y0)
+        page.mouse.down()
+        page.mouse.move(x0 + 60, y0, steps=5)
+        page.mouse.up()
+        page.wait_for_selector("#pose-confirm:not([hidden])", timeout=WAIT_MS)
+        page.screenshot(path=str(shots / "teleop-set-pose-confirm.png"))
+        page.click("#pose-no")
+        assert page.locator("#pose-confirm").is_hidden()
+        assert sent(page, "/api/initial_pose") == []
+    finally:
+        page.close()
+
+
+def test_place_goal_marker_and_zoom(context: Any, robot: Any, shots: Path) -> None:
+    from sage_robot.core import topics
+    from sage_robot.core.msgs.nav import NavigateFeedback, NavState
+
+    page = open_page(context, robot, "teleop")
+    try:
+        page.wait_for_selector("#places button", timeout=WAIT_MS)
+        page.wait_for_selector("#map[data-map-version]", timeout=WAIT_MS)
+        code = page.get_attribute("#places button", "data-place")
+        title = page.text_content("#places button")
+        robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.DRIVING, code or "", 12.0, 20.0))
+        page.wait_for_function("window.sageMap.placeGoal() !== null", timeout=WAIT_MS)
+        marker = page.evaluate("window.sageMap.placeGoal()")
+        assert marker["title"] == title
+        assert title in (page.text_content("#nav") or "")
+        assert page.get_attribute("#nav", "title") == code
+        page.locator("#map").scroll_into_view_if_needed()
+        page.screenshot(path=str(shots / "teleop-place-goal.png"))
+        robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.IDLE))
+        page.wait_for_function("window.sageMap.placeGoal() === null", timeout=WAIT_MS)
+        # zoom: the buttons, the wheel, back to the whole map
+        before = page.evaluate("window.sageMap.view().scale")
+        page.click("#zoom-in")
+        assert page.evaluate("window.sageMap.view().scale") > before * 1.4
+        box = page.locator("#map").bounding_box()
+        assert box is not None
+        page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        page.mouse.wheel(0, -100)
+        page.wait_for_function(f"window.sageMap.view().scale > {before * 1.6}", timeout=WAIT_MS)
+        page.check("#follow")
+        page.click("#zoom-fit")
+        assert abs(page.evaluate("window.sageMap.view().scale") - before) < 1e-6
+        assert not page.is_checked("#follow")
+    finally:
+        page.close()

@@ -36,6 +36,7 @@ ODOM_SCALE_ERROR = 0.01  # wheel odometry reads 1 % long
 CLUTTER_HEIGHT_M = 1.0  # unmapped boxes as tall as this (the lidar sees them)
 ARRIVED_M = 1.0  # a leg succeeds when the navigator says so and the robot truly stands this close
 # to the goal (the navigator may settle a little short of a spot people stand on)
+SAID_ARRIVED = "the navigator reported arrival"  # a failure reason: it did, too far from the goal
 PLACES_STREAM = 1  # --places auto draws from the generator seeded (seed, this): legs keep theirs
 # Events in which the robot asks people to step aside ("excuse me"): the navigator's
 # blocked_by_people (its message is "excuse me, may I pass?"), or any kind that says so.
@@ -357,7 +358,7 @@ async def _legs(ctx: Any, launcher: Any, legs: list[tuple[str, str]],
             ok, why = False, f"timed out after {LEG_TIMEOUT_S:g} s"
         short_m = math.hypot(goal.x - world.x, goal.y - world.y)
         if ok and short_m > ARRIVED_M:  # the simulator's truth, not the navigator's word
-            ok, why = False, (f"the navigator reported arrival {short_m:.1f} m from the goal "
+            ok, why = False, (f"{SAID_ARRIVED} {short_m:.1f} m from the goal "
                               f"({why or 'no note'})")
         rec = {"from": a, "to": b, "ok": ok, "reason": "" if ok else why,
                "collisions": world.collisions - c0, "time_s": round(clock.now() - t0, 1),
@@ -437,6 +438,7 @@ def summarize(records: list[dict[str, Any]]) -> dict[str, Any]:
         "sim_time_s": round(sum(r["time_s"] for r in records), 1),
         "time_waiting_s": round(sum(r.get("waited_s", 0.0) for r in records), 1),
         "excuse_me": int(sum(r.get("excuse_me", 0) for r in records)),
+        "arrived_short": sum(not r["ok"] and r["reason"].startswith(SAID_ARRIVED) for r in records),
     }
 
 

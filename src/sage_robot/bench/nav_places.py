@@ -141,9 +141,9 @@ def auto_places(space: FreeSpace, n: int, radius_m: float, rng: np.random.Genera
             return chosen
         if (len(chosen), min_separation(chosen)) > (len(best), min_separation(best)):
             best = chosen
-    raise ConfigError(f"only {len(best)} places at least {MIN_SEPARATION_M:g} m apart fit on the map's "
-                      f"reachable free space (asked for {n}; closest pair {min_separation(best):.2f} m): "
-                      "ask for fewer")
+    raise ConfigError(f"{n} places do not fit {MIN_SEPARATION_M:g} m apart on the map's reachable "
+                      f"free space (the best try: {len(best)} places, the closest two "
+                      f"{min_separation(best):.2f} m apart): ask for fewer")
 
 
 def _farthest(space: FreeSpace, cells: np.ndarray, n: int, first: int,

@@ -9,6 +9,7 @@ Conventions
   centre here means touching), 254 lethal, 255 unknown.
 - Inflation (Nav2 ``InflationLayer``): at distance ``d`` from the nearest lethal cell,
   ``d <= inscribed``: 253; ``d <= inflation_radius``: ``252 * exp(-k (d - inscribed))``.
+  Unknown blobs smaller than ``SPECKLE_MAX_M2`` inside the map are speckles (free).
   Obstacles seen by the scan (not in the map) are padded, as people's legs need
   (:func:`person_sized`): a small blob (legs, a person) counts ``OBSTACLE_PAD_M`` nearer,
   as a wall; any larger blob (a box, a cart, a wall the map lacks) and scan hits within
@@ -53,6 +54,7 @@ WALL_PAD_M = 0.15  # walls get a thinner pad than legs, and still a margin for t
 PERSON_BLOB_M = 0.55
 BLOB_JOIN_M = 0.2
 SOFT_PAD_CLEAR_M = 0.02
+SPECKLE_MAX_M2 = 0.5  # unknown blobs smaller than this (m^2) inside the map are noise: free
 ATTACHED_M = 0.3  # a small blob this near a wall or a larger blob belongs to it (m)
 GAP_MARGIN_M = 0.2  # beside a padded person, a gap keeps at least this much open beyond the robot (m)
 
@@ -107,6 +109,22 @@ def costs_from_distance(dist: np.ndarray, lethal: np.ndarray, inscribed_m: float
     cost[(dist <= inscribed_m) & ~lethal] = INSCRIBED
     cost[lethal] = LETHAL
     return cost
+
+
+def drop_speckles(unknown: np.ndarray, resolution: float) -> np.ndarray:
+    """``unknown`` without its speckles: blobs of unknown cells smaller than ``SPECKLE_MAX_M2``
+    that do not touch the grid's edge are map noise in free space (a SLAM map's unseen pixels
+    between two scans), not unexplored space; left unknown they stop the forward check."""
+    if not unknown.any():
+        return unknown
+    labels, n = ndimage.label(unknown, structure=np.ones((3, 3)))
+    sizes = np.bincount(labels.ravel(), minlength=n + 1) * resolution * resolution
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    speck = sizes < SPECKLE_MAX_M2
+    speck[edge] = False
+    speck[0] = False
+    out: np.ndarray = unknown & ~speck[labels]
+    return out
 
 
 def person_sized(marks: np.ndarray, resolution: float, walls: np.ndarray | None = None) -> np.ndarray:
@@ -176,7 +194,7 @@ class Costmap:
         self.geom = geom
         self.inscribed_m, self.inflation_m, self.cost_scaling = inscribed_m, inflation_m, cost_scaling
         self.static = static.astype(bool)
-        self.unknown = unknown.astype(bool)
+        self.unknown = drop_speckles(unknown.astype(bool), geom.resolution)
         self.keepout = np.zeros(geom.shape, bool) if keepout is None else keepout.astype(bool)
         self.speed = np.full(geom.shape, NO_SPEED_LIMIT, np.float32) if speed is None else speed
         self.obstacles = np.zeros(geom.shape, dtype=bool)

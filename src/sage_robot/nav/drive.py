@@ -289,8 +289,7 @@ class GoalRun:
                 return note
         self.feedback(NavState.RECOVERING)
         await self._step_away()
-        if self.node.settings.robot.allow_reverse:
-            await self._back_off()
+        await self._back_off()
         if level == 0:
             self.node.clear_costmaps()
             await self.clock.sleep(CLEAR_SETTLE_S)
@@ -454,6 +453,8 @@ class GoalRun:
         """Reverse slowly, at most BACKUP_M, while an obstacle is close in front and the floor
         behind stays clear (only where ``robot.allow_reverse``): room to turn and replan."""
         node = self.node
+        if not node.settings.robot.allow_reverse:
+            return
         x0, y0, _ = self.pose()
         t_end = self.clock.now() + STEP_AWAY_SLACK * BACKUP_M / BACKUP_SPEED_MPS
         while self.clock.now() < t_end:

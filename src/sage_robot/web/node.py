@@ -71,7 +71,8 @@ class WebNode(Node):
             ws_max_size=WS_MAX_MESSAGE_BYTES,
             timeout_graceful_shutdown=SHUTDOWN_GRACE_S,
             **proxy_options(web.trusted_proxies),
-            **({"ssl_certfile": str(cert.cert), "ssl_keyfile": str(cert.key)} if cert else {}),
+            ssl_certfile=str(cert.cert) if cert else None,
+            ssl_keyfile=str(cert.key) if cert else None,
         )
         self.server = _QuietServer(config)
         self._serve_task = self.spawn(self.server.serve(sockets=[self.sock]), "web.server")

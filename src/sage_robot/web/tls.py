@@ -170,6 +170,13 @@ def ensure_certificate(web: WebSettings, state: Path | None = None) -> CertPair:
             if not path.is_file():
                 raise ConfigError(f"{what}: {path} not found")
         return CertPair(cert, key, made_here=False)
+    try:
+        import cryptography  # noqa: F401
+    except ImportError:
+        raise ConfigError(
+            "web.tls: making a certificate needs the cryptography package (pip install 'sage-robot[web]'); "
+            "or give web.tls_cert/web.tls_key, or set web.tls: off"
+        ) from None
     folder = tls_dir(state)
     cert, key = folder / CERT_FILENAME, folder / KEY_FILENAME
     dns, ips = wanted_names(web)

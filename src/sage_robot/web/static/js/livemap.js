@@ -7,6 +7,9 @@
 
 const DRAG_PX = 8; // a press that moves farther than this is a drag, not a click
 const ROBOT_RADIUS_M = 0.25;
+const ZOOM_MIN = 1;
+const ZOOM_MAX = 16;
+const ZOOM_STEP = 1.25; // one wheel notch or +/- press
 
 export class LiveMap {
   constructor(canvas, { onClick = null, onDrag = null } = {}) {
@@ -20,6 +23,11 @@ export class LiveMap {
     this.places = []; // [{name, title, x, y}] from setPlaces()
     this.pending = null; // a pose waiting for the operator's confirmation (drawn as a ghost robot)
     this.dragColor = "#3fb950";
+    this.zoom = 1; // 1: the whole map fits the canvas
+    this.center = null; // the world point at the canvas's centre (null: the map's centre)
+    this.follow = false; // keep the robot at the centre
+    this.panMode = false; // a drag moves the map instead of calling onDrag
+    canvas.addEventListener("wheel", (e) => this.wheel(e), { passive: false });
     this.press = null;
     this.drawQueued = false;
     canvas.addEventListener("pointerdown", (e) => this.down(e));
@@ -84,15 +92,48 @@ export class LiveMap {
     img.src = msg.url;
   }
 
-  /** Scale and offset that fit the map into the canvas (pixels per metre). */
+  /** Scale (pixels per metre) and offset: the map fitted into the canvas, times the zoom,
+   * around the robot (following), the panned-to point or the map's centre. */
   view() {
     const w = this.canvas.clientWidth, h = this.canvas.clientHeight;
     if (!this.meta) return { scale: 20, ox: w / 2, oy: h / 2, w, h };
     const mw = this.meta.width * this.meta.resolution, mh = this.meta.height * this.meta.resolution;
-    const scale = Math.min(w / mw, h / mh);
-    const ox = (w - mw * scale) / 2 - this.meta.origin.x * scale;
-    const oy = (h + mh * scale) / 2 + this.meta.origin.y * scale;
-    return { scale, ox, oy, w, h };
+    const scale = Math.min(w / mw, h / mh) * this.zoom;
+    let [cx, cy] = this.center || [this.meta.origin.x + mw / 2, this.meta.origin.y + mh / 2];
+    if (this.follow && this.layers.pose) [cx, cy] = [this.layers.pose.x, this.layers.pose.y];
+    return { scale, ox: w / 2 - cx * scale, oy: h / 2 + cy * scale, w, h };
+  }
+
+  /** Zoom by ``factor`` keeping the world point under canvas pixel (px, py) in place. */
+  zoomBy(factor, px = this.canvas.clientWidth / 2, py = this.canvas.clientHeight / 2) {
+    const v = this.view();
+    const [wx, wy] = this.toWorld(px, py, v);
+    const old = this.zoom;
+    this.zoom = Math.min(ZOOM_MAX, Math.max(ZOOM_MIN, this.zoom * factor));
+    const scale = v.scale * (this.zoom / old);
+    if (!this.follow) this.center = [wx - (px - v.w / 2) / scale, wy + (py - v.h / 2) / scale];
+    if (this.zoom === ZOOM_MIN) this.center = null;
+    this.redraw();
+  }
+
+  /** The whole map again. */
+  fit() {
+    this.zoom = 1;
+    this.center = null;
+    this.follow = false;
+    this.redraw();
+  }
+
+  setFollow(on) {
+    this.follow = on;
+    if (!on && this.layers.pose) this.center = [this.layers.pose.x, this.layers.pose.y];
+    this.redraw();
+  }
+
+  wheel(e) {
+    e.preventDefault();
+    const [px, py] = this.local(e);
+    this.zoomBy(e.deltaY < 0 ? ZOOM_STEP : 1 / ZOOM_STEP, px, py);
   }
 
   toPx(x, y, v = this.view()) {
@@ -147,13 +188,18 @@ export class LiveMap {
       g.stroke();
     }
     g.font = "12px system-ui";
+    const taken = []; // label boxes drawn: a label that would overlap one is left out
     for (const p of this.places) {
       const [px, py] = this.toPx(p.x, p.y, v);
       g.fillStyle = "#a371f7";
       g.beginPath();
       g.arc(px, py, 4, 0, 2 * Math.PI);
       g.fill();
-      this.label(p.title || p.name, px + 6, py - 6);
+      const text = p.title || p.name;
+      const box = [px + 4, py - 17, px + 10 + g.measureText(text).width, py - 2];
+      if (taken.some((b) => box[0] < b[2] && b[0] < box[2] && box[1] < b[3] && b[1] < box[3])) continue;
+      taken.push(box);
+      this.label(text, px + 6, py - 6);
     }
     const goal = L.goal || this.placeGoal();
     if (goal) {
@@ -193,7 +239,7 @@ export class LiveMap {
       g.fillStyle = "#d29922";
       g.fillText(`robot drawn from ${L.pose.frame} (not localized on the map)`, 8, 36);
     }
-    if (this.press && this.press.dragging) {
+    if (this.press && this.press.dragging && !this.panMode) {
       this.arrow(this.press.px, this.press.py, this.press.qx, this.press.qy, this.dragColor);
     }
   }
@@ -256,7 +302,9 @@ export class LiveMap {
 
   down(e) {
     const [px, py] = this.local(e);
-    this.press = { px, py, qx: px, qy: py, dragging: false };
+    const v = this.view();
+    const [cx, cy] = this.toWorld(v.w / 2, v.h / 2, v);
+    this.press = { px, py, qx: px, qy: py, dragging: false, center: [cx, cy], scale: v.scale };
     this.canvas.setPointerCapture(e.pointerId);
   }
 
@@ -265,6 +313,11 @@ export class LiveMap {
     const [qx, qy] = this.local(e);
     Object.assign(this.press, { qx, qy });
     if (Math.hypot(qx - this.press.px, qy - this.press.py) > DRAG_PX) this.press.dragging = true;
+    if (this.press.dragging && this.panMode) {
+      const p = this.press;
+      this.follow = false;
+      this.center = [p.center[0] - (qx - p.px) / p.scale, p.center[1] + (qy - p.py) / p.scale];
+    }
     if (this.press.dragging) this.redraw();
   }
 
@@ -274,6 +327,10 @@ export class LiveMap {
     if (!p) return;
     const [qx, qy] = this.local(e);
     const [x, y] = this.toWorld(p.px, p.py);
+    if (this.panMode) {
+      this.redraw(); // a pan ends where it is; a click in pan mode does nothing
+      return;
+    }
     if (Math.hypot(qx - p.px, qy - p.py) > DRAG_PX) {
       const [x2, y2] = this.toWorld(qx, qy);
       if (this.onDrag) this.onDrag(x, y, Math.atan2(y2 - y, x2 - x));

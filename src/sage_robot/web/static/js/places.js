@@ -16,6 +16,12 @@ export function humanName(code) {
     .join(" ");
 }
 
+/** A knowledge-base document title "Guelly Delly café (GUELLY_DELLY)" -> [code, title], else null. */
+export function kbPlaceTitle(docTitle) {
+  const m = KB_TITLE.exec(docTitle || "");
+  return m ? [m[2], m[1]] : null;
+}
+
 /** Code name -> title, from the knowledge base's documents (empty when it has none). */
 async function kbTitles() {
   const titles = new Map();
@@ -25,8 +31,8 @@ async function kbTitles() {
   if (!docs.ok) return titles;
   const list = Array.isArray(docs.data) ? docs.data : docs.data.documents || [];
   for (const d of list) {
-    const m = KB_TITLE.exec(d.title || "");
-    if (m) titles.set(m[2], m[1]);
+    const pair = kbPlaceTitle(d.title);
+    if (pair) titles.set(...pair);
   }
   return titles;
 }

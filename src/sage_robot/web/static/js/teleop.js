@@ -128,9 +128,18 @@ const map = new LiveMap($("map"), {
 for (const input of document.querySelectorAll("input[name=tool]")) {
   input.addEventListener("change", () => {
     map.dragColor = tool() === "goal" ? "#3fb950" : "#f2b705";
-    if (tool() === "goal") clearPose();
+    map.panMode = tool() === "pan";
+    $("map").style.cursor = map.panMode ? "move" : "crosshair";
+    if (tool() !== "pose") clearPose();
   });
 }
+$("zoom-in").addEventListener("click", () => map.zoomBy(1.5));
+$("zoom-out").addEventListener("click", () => map.zoomBy(1 / 1.5));
+$("zoom-fit").addEventListener("click", () => {
+  map.fit();
+  $("follow").checked = false;
+});
+$("follow").addEventListener("change", () => map.setFollow($("follow").checked));
 $("pose-yes").addEventListener("click", async () => {
   const pose = pendingPose;
   clearPose();
