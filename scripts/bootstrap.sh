@@ -72,7 +72,7 @@ node_packages() {
   npm install --silent --no-save --no-package-lock --no-audit --no-fund --prefix "$AXE_DIR" "axe-core@$AXE_VERSION"
 }
 
-setup() { system_packages; python_packages; node_packages; }
+setup() { system_packages; python_packages; }
 
 cmd=${1:-sim}; shift || true
 case "$cmd" in
@@ -80,6 +80,7 @@ case "$cmd" in
   sim) setup; exec "$VENV/bin/sage" sim "$@" ;;
   test)
     setup
+    node_packages  # only the tests need it
     set +e
     "$VENV/bin/python" -m pytest "$@"
     rc=$?

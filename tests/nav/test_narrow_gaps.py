@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from sage_robot.core import topics
+from sage_robot.core.clock import SimClock
 from sage_robot.core.msgs import OccupancyGrid
 from sage_robot.core.msgs.nav import NavigateGoal
 
@@ -158,11 +159,10 @@ class _Host:
     """Just enough of a navigator for one recovery: a robot on a costmap that moves as told."""
 
     def __init__(self, cm, pose, allow_reverse: bool) -> None:
-        from sage_robot.core.clock import SimClock
         from sage_robot.core.config import Settings
 
         self.settings = Settings.model_validate({"robot": {"allow_reverse": allow_reverse}})
-        self.clock = SimClock()
+        self.clock = _Clock()
         self.local_cm = self.global_cm = cm
         self._pose = pose
         self.cmds: list[tuple[float, float]] = []
@@ -199,8 +199,7 @@ async def test_backs_off_from_an_obstacle_in_front_only_where_allowed(allow_reve
     _box(g, 3.0, 0.0, 3.4, 3.0)  # a wall across, 0.35 m in front of the robot's centre
     cm = Costmap.from_grid(g, 0.25, 0.55, 3.0)
     host = _Host(cm, (2.65, 1.5, 0.0), allow_reverse)
-    run = GoalRun(host, Target("", "the goal", (1.0, 1.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type]
-    host.clock.sleep = _advance(host.clock)  # type: ignore[method-assign]
+    run = GoalRun(host, Target("", "the goal", (1.0, 1.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type, unused-ignore]
     await run._back_off()
     if not allow_reverse:
         assert not any(v < 0 for v, _ in host.cmds)
@@ -210,11 +209,11 @@ async def test_backs_off_from_an_obstacle_in_front_only_where_allowed(allow_reve
     assert all(v <= 0 and w == 0 for v, w in host.cmds)
 
 
-def _advance(clock):
-    async def sleep(dt: float) -> None:
-        clock._now += dt  # a bare SimClock that nobody steps: the test advances it
+class _Clock(SimClock):
+    """A SimClock nobody steps: sleeping advances it."""
 
-    return sleep
+    async def sleep(self, dt: float) -> None:
+        self._now += dt
 
 
 def test_unknown_speckles_in_free_space_do_not_block_but_unexplored_space_does() -> None:

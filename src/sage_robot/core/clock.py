@@ -115,41 +115,36 @@ class SimClock(Clock):
         they offloaded (not the order the threads happened to finish); a job with a latency
         hands its result over at its due time, in a heap with every other wake-up, so a run
         does not depend on how long the jobs took on this machine."""
+        loop = asyncio.get_running_loop()
         job = next(self._seq)
         self.offloaded += 1
+        due = self._now + max(0.0, latency_s)
+        self._jobs[job] = due
+        thread = asyncio.ensure_future(asyncio.to_thread(fn, *args))
+        # Time waits for the thread itself, also when its caller was cancelled (a replan given
+        # up): the thread goes on touching what it was given, so no step may pass it by.
+        thread.add_done_callback(lambda t: self._thread_done(job, t))
         if latency_s > 0:
-            wake: asyncio.Future[None] = asyncio.get_running_loop().create_future()
-            due = self._now + latency_s
+            wake: asyncio.Future[None] = loop.create_future()
             heapq.heappush(self._waiters, (due, job, wake))
-            self._jobs[job] = due
-            try:
-                outcome = await self._run_job(fn, args)
-            finally:
-                self._job_done(job)
+            await asyncio.wait({thread})
             await wake
-            return outcome.result()
-        earlier, mine = self._last_job, asyncio.get_running_loop().create_future()
+            return thread.result()
+        earlier, mine = self._last_job, loop.create_future()
         self._last_job = mine
-        self._jobs[job] = self._now
         try:
-            result = await asyncio.to_thread(fn, *args)
+            await asyncio.wait({thread})
             if earlier is not None:
                 await asyncio.shield(earlier)
-            return result
+            return thread.result()
         finally:
             if not mine.done():
                 mine.set_result(None)
-            self._job_done(job)
 
-    @staticmethod
-    async def _run_job(fn: Callable[..., T], args: tuple[Any, ...]) -> asyncio.Future[T]:
-        """The job's result or exception, held until it is handed over."""
-        outcome: asyncio.Future[T] = asyncio.get_running_loop().create_future()
-        try:
-            outcome.set_result(await asyncio.to_thread(fn, *args))
-        except Exception as exc:
-            outcome.set_exception(exc)
-        return outcome
+    def _thread_done(self, job: int, thread: asyncio.Future[Any]) -> None:
+        if not thread.cancelled():
+            thread.exception()  # taken by the caller's result(); not "never retrieved" if it left
+        self._job_done(job)
 
     def _job_done(self, job: int) -> None:
         self._jobs.pop(job, None)

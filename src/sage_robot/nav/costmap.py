@@ -227,7 +227,11 @@ class Costmap:
 
     def window(self, cx: float, cy: float, size_m: float) -> Costmap:
         """A rolling local costmap: the square of side ``size_m`` centred on (cx, cy), static and
-        keepout layers copied, obstacle layer empty (the local costmap marks only live scans)."""
+        keepout layers copied, obstacle layer empty (the local costmap marks only live scans).
+        As Nav2's rolling local costmap (``track_unknown_space: false``) it does not keep the
+        map's unknown cells, only what lies outside the map: the planner keeps out of unknown
+        space, and the forward check must not stop the robot beside a patch of it (issue #20:
+        on a real SLAM map, unseen patches beside the path stopped it for good)."""
         g, n = self.geom, max(3, round(size_m / self.geom.resolution))
         rc = g.to_cell(cx - size_m / 2, cy - size_m / 2)
         r0, c0 = int(rc[0]), int(rc[1])
@@ -241,7 +245,11 @@ class Costmap:
                 out[rs.start - r0:rs.stop - r0, cs.start - c0:cs.stop - c0] = a[rs, cs]
             return out
 
-        return Costmap(geom, cut(self.static, True), cut(self.unknown, True), self.inscribed_m,
+        outside = np.ones((n, n), dtype=bool)
+        rs, cs = slice(max(r0, 0), min(r0 + n, g.shape[0])), slice(max(c0, 0), min(c0 + n, g.shape[1]))
+        if rs.start < rs.stop and cs.start < cs.stop:
+            outside[rs.start - r0:rs.stop - r0, cs.start - c0:cs.stop - c0] = False
+        return Costmap(geom, cut(self.static, True), outside, self.inscribed_m,
                        self.inflation_m, self.cost_scaling, cut(self.keepout, False),
                        cut(self.speed, NO_SPEED_LIMIT))
 

@@ -34,6 +34,7 @@ worker thread.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -58,6 +59,7 @@ if TYPE_CHECKING:
 LOCALIZED_WAIT_S = 10.0  # wait this long for a first pose before giving up
 PROGRESS_RESET_M = 1.0  # driving this far after a recovery resets the recovery ladder
 CLEAR_SETTLE_S = 0.5  # after clearing the costmaps, let fresh scans come in (s)
+PLAN_DROP_WAIT_S = 5.0  # bound on waiting for a plan in flight when a drive ends (s)
 PLAN_LATENCY_S = 0.1  # time a plan may take (a Jetson's planner on a building map): in the
 #   simulator the robot drives on beside it and the plan arrives exactly this much later (s)
 WATCH_PERIOD_S = 0.5  # how often the intended path is checked while waiting for people (s)
@@ -243,9 +245,13 @@ class GoalRun:
                 await self.clock.sleep(self.dt)
         finally:
             if replan is not None:
-                replan.cancel()  # does nothing to a finished plan
-                if replan.done() and not replan.cancelled():
-                    replan.exception()  # a Blocked nobody took any more: taken here
+                await self._drop_plan(replan)
+
+    async def _drop_plan(self, replan: asyncio.Future[Plan]) -> None:
+        """A plan still in flight is let finish, then dropped: its thread changes the global
+        costmap, and the next plan or path check must not run beside it."""
+        with contextlib.suppress(Exception):  # a Blocked nobody needs any more
+            await self.clock.wait_for(asyncio.shield(replan), PLAN_DROP_WAIT_S)
 
     async def _watch_lost(self, now: float, lost_since: float | None) -> float | None:
         """Since when localization has said "lost" (None: it does not); lost for
@@ -305,15 +311,21 @@ class GoalRun:
 
     def _why_blocked(self) -> str:
         """Why the robot gives up, as it saw it: people when what blocks the intended path moved
-        while it watched or is person-sized; an obstacle not on the map when it stood still and
-        is bigger than a person."""
+        while it watched; an obstacle not on the map when it stood still and is bigger than a
+        person; an obstacle or someone standing still when it stood still and is person-sized
+        (a box's face and a person's legs look alike to a lidar)."""
         where = f"to {self.target.spoken}" if self.target.name else "to the goal"
         sizes = self._blocker_sizes
-        if sizes and not self._blocker_moved and min(sizes) > PERSON_SIZED_M:
+        if sizes and not self._blocker_moved:
             waited = f" (I watched it {self._waited_s:.0f} s: it did not move)" \
                 if self._waited_s >= 1.0 else ""
-            return (f"the way {where} is blocked by an obstacle that is not on the map, about "
-                    f"{max(sizes):.1f} m across{waited}; I found no way around it")
+            if min(sizes) > PERSON_SIZED_M:
+                return (f"the way {where} is blocked by an obstacle that is not on the map, about "
+                        f"{max(sizes):.1f} m across{waited}; I found no way around it")
+            if self._waited_s >= 1.0:  # as small as a person, and it stood still: either
+                return (f"the way {where} is blocked by something not on the map, about "
+                        f"{max(sizes):.1f} m across: an obstacle, or someone standing still{waited}; "
+                        "I found no way around it")
         if sizes or self._blocker_moved:
             waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
                 if self._waited_s >= 1.0 else "people are in the way and "

@@ -147,6 +147,9 @@ $("pose-yes").addEventListener("click", async () => {
   const { ok, data } = await api("/api/initial_pose", pose);
   $("goal-msg").textContent = ok ? `pose set to ${at(pose.x, pose.y)} facing ${deg(pose.theta)}` : data.error;
 });
+window.addEventListener("keydown", (e) => {
+  if (e.key === "Escape" && pendingPose) $("pose-no").click();
+});
 $("pose-no").addEventListener("click", () => {
   clearPose();
   $("goal-msg").textContent = "pose not changed";
