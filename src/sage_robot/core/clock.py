@@ -106,7 +106,9 @@ class SimClock(Clock):
         self._seq = itertools.count()
         self._jobs: dict[int, float] = {}  # offloaded jobs running now -> when they are due
         self._jobs_done: asyncio.Event | None = None
-        self._last_job: asyncio.Future[None] | None = None  # released when its caller has the result
+        # callers of finished jobs due at once, waiting to be handed their results (job order)
+        self._held: dict[int, asyncio.Future[None]] = {}
+        self._driven = False  # run() is stepping: results are handed over between steps
         self.offloaded = 0  # jobs run so far
 
     async def offload(self, fn: Callable[..., T], *args: Any, latency_s: float = 0.0) -> T:
@@ -130,16 +132,15 @@ class SimClock(Clock):
             await asyncio.wait({thread})
             await wake
             return thread.result()
-        earlier, mine = self._last_job, loop.create_future()
-        self._last_job = mine
+        release: asyncio.Future[None] = loop.create_future()
+        self._held[job] = release
         try:
             await asyncio.wait({thread})
-            if earlier is not None:
-                await asyncio.shield(earlier)
+            if self._driven:
+                await release  # at the next step's hand-over, in offload order
             return thread.result()
         finally:
-            if not mine.done():
-                mine.set_result(None)
+            self._held.pop(job, None)
 
     def _thread_done(self, job: int, thread: asyncio.Future[Any]) -> None:
         if not thread.cancelled():
@@ -152,13 +153,47 @@ class SimClock(Clock):
             self._jobs_done.set()
 
     async def _wait_for_jobs(self, t: float) -> None:
-        """Until no running job is due by ``t``."""
-        while any(due <= t + TIME_EPS_S for due in self._jobs.values()):
-            if self._jobs_done is None:
-                self._jobs_done = asyncio.Event()
-            self._jobs_done.clear()
-            await self._jobs_done.wait()
-            for _ in range(SETTLE_ROUNDS):  # the callers go on from their results first
+        """Until no running job is due by ``t``, handing finished jobs due at once their
+        results on the way (:meth:`_hand_over`)."""
+        while True:
+            await self._hand_over()
+            if not any(due <= t + TIME_EPS_S for due in self._jobs.values()):
+                return
+            await self._job_finished()
+
+    async def _hand_over_until(self, hook: asyncio.Future[Any]) -> None:
+        """Await an ``on_step`` hook, handing over results meanwhile (the node it waits for
+        may be waiting for one)."""
+        while not hook.done():
+            await self._hand_over()
+            finished = asyncio.ensure_future(self._armed().wait())  # armed before any yield
+            await asyncio.wait({hook, finished}, return_when=asyncio.FIRST_COMPLETED)
+            finished.cancel()
+        hook.result()
+
+    def _armed(self) -> asyncio.Event:
+        """The event the next finished job sets, cleared now."""
+        if self._jobs_done is None:
+            self._jobs_done = asyncio.Event()
+        self._jobs_done.clear()
+        return self._jobs_done
+
+    async def _job_finished(self) -> None:
+        await self._armed().wait()
+
+    async def _hand_over(self) -> None:
+        """Hand the callers of finished jobs due at once their results, strictly in offload
+        order (a job still running holds back every later one), each caller going on from its
+        result before the next. Results are handed over here, at the stepper's points, never
+        whenever a thread happens to finish, so the interleaving is the same on every run."""
+        while True:
+            first = min(self._held, default=None)
+            if first is None or first in self._jobs:  # none waiting, or the first still runs
+                return
+            release = self._held.pop(first)
+            if not release.done():
+                release.set_result(None)
+            for _ in range(SETTLE_ROUNDS):  # the caller goes on from its result first
                 await asyncio.sleep(0)
 
     def now(self) -> float:
@@ -212,6 +247,23 @@ class SimClock(Clock):
         runs slower than asked and never races to catch up: work done in threads (planning,
         localization) takes wall time, and a burst of simulated time would leave it behind.
         """
+        self._driven = True
+        try:
+            await self._run(step_s, speed, until, stop, on_step)
+        finally:
+            self._driven = False
+            for release in self._held.values():  # nobody steps any more: hand results over now
+                if not release.done():
+                    release.set_result(None)
+
+    async def _run(
+        self,
+        step_s: float,
+        speed: float | None,
+        until: float | None,
+        stop: asyncio.Event | None,
+        on_step: Callable[[float], Any] | None,
+    ) -> None:
         wall0, sim0 = time.monotonic(), self._now
         pace_wall, pace_sim = wall0, sim0  # the pacing reference, moved on when behind
         k = 0  # steps taken: time is sim0 + k * step_s, so float errors do not accumulate
@@ -219,8 +271,8 @@ class SimClock(Clock):
         while (until is None or self._now < until - TIME_EPS_S) and not (stop and stop.is_set()):
             if on_step is not None:
                 result = on_step(step_s)
-                if inspect.isawaitable(result):
-                    await result
+                if inspect.isawaitable(result):  # a hook may wait for a node (a reader in lockstep)
+                    await self._hand_over_until(asyncio.ensure_future(result))
             k += 1
             await self._step_to(sim0 + k * step_s)
             if speed is not None:

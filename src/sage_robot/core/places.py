@@ -10,6 +10,7 @@ Two formats load:
         description: Engineering student café (breakfast and lunch)
         aliases: [the cafe, guelly delly, the deli]
         dwell_text: Here is the Guelly Delly ...   # optional
+        title: Guelly Delly café                   # optional: the name pages show
 
 - the seed robot's Nav2 style (``maps/new_waypoints.yaml``)::
 
@@ -35,7 +36,7 @@ from sage_robot.core.geometry import quaternion_to_yaw
 from sage_robot.core.mapio import FREE, in_bounds, world_to_cell
 from sage_robot.core.msgs import OccupancyGrid, Pose2D
 
-PLACE_KEYS = {"name", "pose", "description", "aliases", "dwell_text"}
+PLACE_KEYS = {"name", "pose", "description", "aliases", "dwell_text", "title"}
 FUZZY_CUTOFF = 70.0  # rapidfuzz score (0..100) below which a spoken name matches nothing
 _NUMBER_WORDS = {"three d": "3d", "3 d": "3d", "one": "1", "two": "2", "three": "3"}
 
@@ -57,6 +58,7 @@ class Place:
     description: str = ""
     aliases: tuple[str, ...] = ()
     dwell_text: str = ""
+    title: str = ""  # the human name pages show ("Guelly Delly café"); "" = made from the name
 
     def spoken_names(self) -> tuple[str, ...]:
         return (normalize(self.name), *(normalize(a) for a in self.aliases))
@@ -165,6 +167,7 @@ def _place(entry: Any, where: str) -> Place:
         str(entry.get("description", "")),
         tuple(aliases),
         str(entry.get("dwell_text", "")),
+        str(entry.get("title", "") or "").strip(),
     )
 
 
@@ -202,6 +205,7 @@ def dump_places(places: Places) -> dict[str, Any]:
                 "description": p.description,
                 "aliases": list(p.aliases),
                 **({"dwell_text": p.dwell_text} if p.dwell_text else {}),
+                **({"title": p.title} if p.title else {}),
             }
             for p in places
         ]

@@ -319,7 +319,7 @@ class GoalRun:
         if sizes and not self._blocker_moved:
             waited = f" (I watched it {self._waited_s:.0f} s: it did not move)" \
                 if self._waited_s >= 1.0 else ""
-            if min(sizes) > PERSON_SIZED_M:
+            if max(sizes) > PERSON_SIZED_M:
                 return (f"the way {where} is blocked by an obstacle that is not on the map, about "
                         f"{max(sizes):.1f} m across{waited}; I found no way around it")
             if self._waited_s >= 1.0:  # as small as a person, and it stood still: either
@@ -385,19 +385,19 @@ class GoalRun:
         d = np.hypot(points[:, 0] - pose[0], points[:, 1] - pose[1])
         ahead = points[int(np.argmin(d)):]
         ahead = ahead[np.hypot(ahead[:, 0] - pose[0], ahead[:, 1] - pose[1]) > self.params.xy_tolerance_m]
-        self._look_at_blockers(node.global_cm, ahead)
+        self._look_at_blockers(node.global_cm, ahead, pose)
         if path_blocked(node.global_cm, ahead, WATCH_AHEAD_M):
             return False
         return len(ahead) < 2 or local is None or \
             not PurePursuit(ahead, self.params, self.target.pose[2]).step(pose, local).blocked
 
-    def _look_at_blockers(self, cm: Costmap, ahead: np.ndarray) -> None:
+    def _look_at_blockers(self, cm: Costmap, ahead: np.ndarray, pose: tuple[float, float, float]) -> None:
         """Note what the scan marks on the first WATCH_AHEAD_M of the intended path: the sizes of
         its blobs, and whether it moved since the wait's first look."""
         res = cm.geom.resolution
         pts = ahead[:max(1, int(WATCH_AHEAD_M / PATH_SPACING_M))]
         k = max(1, round(BLOCKER_NEAR_M / res))
-        r, c = cm.geom.to_cell(pts[:, 0], pts[:, 1]) if len(pts) else cm.geom.to_cell(*self.pose()[:2])
+        r, c = cm.geom.to_cell(pts[:, 0], pts[:, 1]) if len(pts) else cm.geom.to_cell(pose[0], pose[1])
         r, c = np.atleast_1d(r), np.atleast_1d(c)
         m = k + round(PERSON_SIZED_M / res) + 4  # the window: the path, the blobs on it, their extent
         r0, c0 = max(int(r.min()) - m, 0), max(int(c.min()) - m, 0)

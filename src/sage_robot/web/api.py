@@ -10,6 +10,9 @@ import asyncio
 import contextlib
 import dataclasses
 import math
+import re
+from functools import lru_cache
+from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Request
@@ -28,6 +31,10 @@ PLACES_TIMEOUT_S = 2.0
 MAX_COORD_M = 10_000.0  # a pose farther than this from the origin is a typo
 MAX_SHOWN_CHARS = 40  # of a bad value quoted back in an error
 MJPEG_BOUNDARY = "sageframe"
+KB_TITLE = re.compile(r"^#\s*(.*\S)\s*\(([A-Z0-9_]+)\)\s*$")  # "# Guelly Delly café (GUELLY_DELLY)"
+CODE_NAME = re.compile(r"^[A-Z0-9_]+$")
+KEEP_UPPER = re.compile(r"^(?:[A-Z]{2,3}|\d\w*|\w*\d)$")  # ECE, 3D, the 1 of LAB_1 (as js/places.js)
+WORDS = {"LAB", "BAY", "BIO", "ENG", "HUB"}  # short words that are words, not acronyms
 
 _log = get_logger("web")
 
@@ -75,6 +82,38 @@ async def map_png(request: Request) -> Response:
     return Response(found[1], media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
+def human_name(code: str) -> str:
+    """A code name written as words: "GUELLY_DELLY" -> "Guelly Delly", "ECE_LAB_1" -> "ECE Lab 1"."""
+    words = [w for w in re.split(r"[_\s]+", code) if w]
+    return " ".join(w if KEEP_UPPER.match(w) and w not in WORDS else w[:1] + w[1:].lower() for w in words)
+
+
+@lru_cache(maxsize=4)
+def kb_titles(folder: Path) -> dict[str, str]:
+    """Code name -> title from the knowledge base's place documents ("# Title (CODE)")."""
+    titles: dict[str, str] = {}
+    with contextlib.suppress(OSError):
+        for doc in sorted(folder.glob("*.md")):
+            with contextlib.suppress(OSError, UnicodeDecodeError):
+                first = doc.read_text(encoding="utf-8").lstrip().split("\n", 1)[0]
+                m = KB_TITLE.match(first)
+                if m:
+                    titles[m.group(2)] = m.group(1)
+    return titles
+
+
+def place_title(name: str, title: str = "") -> str:
+    """What pages call a place: its own title, else the knowledge base's, else its name as words.
+    A label that is no code name (a pose goal's "(1.0, 2.0)") stays as it is."""
+    if title:
+        return title
+    if not CODE_NAME.match(name):
+        return name
+    from sage_robot.core.paths import package_data
+
+    return kb_titles(package_data("kb", "places")).get(name) or human_name(name)
+
+
 async def list_places(request: Request) -> list[dict[str, Any]]:
     """Places from navigation's service, else from the waypoints file."""
     st = state_of(request)
@@ -83,21 +122,32 @@ async def list_places(request: Request) -> list[dict[str, Any]]:
         with contextlib.suppress(SageError):
             reply = await bus.call(topics.PLACES, None, timeout=PLACES_TIMEOUT_S)
             if isinstance(reply, PlaceList):
-                return [_place_dict(p.name, p.pose, p.description, p.aliases) for p in reply.places]
+                titles = {p.name: p.title for p in await _file_places(request)}
+                return [
+                    _place_dict(p.name, p.pose, p.description, p.aliases, titles.get(p.name, ""))
+                    for p in reply.places
+                ]
+    found = await _file_places(request)
+    return [_place_dict(p.name, p.pose, p.description, p.aliases, p.title) for p in found]
+
+
+async def _file_places(request: Request) -> list[Any]:
     from sage_robot.core.paths import waypoints_yaml
     from sage_robot.core.places import load_places
 
     try:
-        places = await asyncio.to_thread(load_places, waypoints_yaml(st.node.settings))
+        return list(await asyncio.to_thread(load_places, waypoints_yaml(state_of(request).node.settings)))
     except ConfigError as exc:
         _log.warning("no places", error=str(exc))
         return []
-    return [_place_dict(p.name, p.pose, p.description, p.aliases) for p in places]
 
 
-def _place_dict(name: str, pose: Pose2D, description: str, aliases: tuple[str, ...]) -> dict[str, Any]:
+def _place_dict(
+    name: str, pose: Pose2D, description: str, aliases: tuple[str, ...], title: str = ""
+) -> dict[str, Any]:
     return {
         "name": name,
+        "title": place_title(name, title),
         "x": round(pose.x, 3),
         "y": round(pose.y, 3),
         "theta": round(pose.theta, 4),
@@ -140,6 +190,17 @@ async def goal(request: Request) -> dict[str, Any]:
 @router.post("/api/cancel", dependencies=[Depends(require_operator)])
 async def cancel(request: Request) -> dict[str, Any]:
     await state_of(request).teleop.cancel_navigation()
+    return {"ok": True}
+
+
+@router.post("/api/guide/stop")
+async def guide_stop(request: Request) -> dict[str, Any]:
+    """The kiosk face's Stop (public): a visitor ends the walk they are on. It only cancels
+    navigation goals (never drives, never touches the e-stop), so it is safe for anyone at the
+    robot; the request guard still refuses other sites (Origin)."""
+    st = state_of(request)
+    await st.teleop.cancel_navigation()
+    _log.info("guided walk stopped from the face", client=request.client.host if request.client else "")
     return {"ok": True}
 
 

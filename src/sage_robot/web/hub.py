@@ -6,6 +6,11 @@ sends the latest of each, no more often than the channel's minimum interval. A s
 phone therefore skips intermediate values instead of queueing them, and one slow
 client never holds up another. Camera frames work the same way (latest frame only).
 Events (arrivals, safety stops) are the exception: each is kept, in a short ring.
+
+The ``captions`` channel is what the kiosk face prints of every turn: the visitor's words
+(the robot's microphone on ``/sage/heard``, a ``/talk`` question), the robot's answers (the
+voice pipeline's reply, a ``/talk`` reply) and announcements (``/sage/say``); its message holds
+the last :data:`CAPTIONS_KEPT` lines, so latest-only delivery loses none of a turn.
 """
 
 from __future__ import annotations
@@ -31,10 +36,11 @@ from sage_robot.core.msgs import (
     Path,
     PoseStamped,
     PoseWithCovariance,
+    Text,
 )
 from sage_robot.core.msgs.nav import LocalizationHealth
 from sage_robot.core.msgs.sim import People
-from sage_robot.core.msgs.voice import AudioChunk, Doa, UiState
+from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
 from sage_robot.core.node import Node
 from sage_robot.web import views
 from sage_robot.web.navstate import NavTracker
@@ -55,10 +61,13 @@ MIN_INTERVAL_S: dict[str, float] = {
     "estop": 0.0,
     "teleop": 0.0,
     "nav": 0.2,
+    "captions": 0.1,
     "camera": 1.0 / 15.0,  # frames/s cap per client; web.camera_fps overrides
 }
 EVENTS_KEPT = 50  # recent events shown on a newly opened page
 QUEUE_KEPT = 100  # events and audio chunks queued per client before the oldest is dropped
+CAPTIONS_KEPT = 6  # caption lines in the captions channel's message
+CAPTION_MAX_CHARS = 600  # of one caption line
 AUDIO_HEADER = struct.Struct("<I")  # binary audio message: sample rate (Hz), then int16 LE PCM
 
 
@@ -104,6 +113,10 @@ class Hub:
         self.camera_sub: Subscription[CompressedImage] | None = None  # only while someone watches
         self.camera_viewers = 0
         self.nav = NavTracker(self)
+        self.captions: deque[dict[str, Any]] = deque(maxlen=CAPTIONS_KEPT)
+        self._caption_seq = 0
+        self._voice_reply = ""  # the voice pipeline's reply of the running turn (from ui_state)
+        self._voice_captioned = ""  # the last one captioned (ui_state keeps it until the next turn)
 
     def start(self) -> None:
         sub = self.node.subscribe
@@ -122,6 +135,8 @@ class Hub:
         sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
         sub(topics.AUDIO_OUT, AudioChunk, self._on_audio, maxsize=50)
         sub(topics.SIM_PEOPLE, People, self._on_people)  # published only by the simulator
+        sub(topics.HEARD, Text, lambda m: self.caption("visitor", m.data, "microphone"), maxsize=20)
+        sub(topics.SAY, Text, lambda m: self.caption("robot", m.data, "announcement"), maxsize=20)
         self.set("estop", {"type": "estop", "engaged": False})
 
     def stop(self) -> None:
@@ -131,6 +146,10 @@ class Hub:
 
     # ------------------------------------------------------------ fan-out
     def set(self, channel: str, message: dict[str, Any]) -> None:
+        if channel == "nav" and "title" not in message:  # the destination as pages name it
+            from sage_robot.web.api import place_title
+
+            message = {**message, "title": place_title(str(message.get("place") or ""))}
         self.latest[channel] = message
         for listener in self.listeners:
             listener.mark(channel)
@@ -202,6 +221,33 @@ class Hub:
         # Sent right after it (channels go out in name order): the seed's face page shows its
         # "searching" phase while SAGE's shows "navigating" (each ignores the other's phase).
         self.set("ui_state_seed", views.seed_ui_state(state))
+        self._caption_voice_reply(state)
+
+    def caption(self, who: str, text: str, via: str) -> None:
+        """A line for the face: ``who`` is "visitor" or "robot"; ``via`` where it came from
+        ("microphone", "talk", "voice", "announcement")."""
+        text = " ".join(text.split())[:CAPTION_MAX_CHARS]
+        if not text:
+            return
+        self._caption_seq += 1
+        self.captions.append(
+            {"id": self._caption_seq, "who": who, "text": text, "via": via, "t": round(self.clock.now(), 2)}
+        )
+        self.set("captions", {"type": "captions", "items": list(self.captions)})
+
+    def _caption_voice_reply(self, state: dict[str, Any]) -> None:
+        """The voice pipeline's reply streams into ui_state.llm_tokens; it becomes a caption
+        when its turn ends (the face shows the streaming text live meanwhile)."""
+        tokens = str(state.get("llm_tokens") or "")
+        if not tokens:  # a new turn cleared them
+            self._voice_captioned = ""
+        if state.get("phase") in (Phase.THINKING.value, Phase.SPEAKING.value):
+            if tokens and tokens != self._voice_captioned:  # not the last turn's, kept on show
+                self._voice_reply = tokens
+            return
+        if self._voice_reply:
+            self.caption("robot", self._voice_reply, "voice")
+            self._voice_captioned, self._voice_reply = self._voice_reply, ""
 
     def _on_doa(self, msg: Doa) -> None:
         self.set("doa", {"type": "doa", "angle": round(msg.angle_deg, 1), "source": msg.source})

@@ -1,7 +1,9 @@
 """WebSockets (the protocol is in docs/protocols.md).
 
 - ``/ws/teleop`` (operator): control in, e-stop, ping; see :mod:`teleop`.
-- ``/ws/status`` (public): battery, ui_state, e-stop state, ping/pong — the seed's.
+- ``/ws/status`` (public): battery, ui_state, e-stop state, ping/pong — the seed's; and for
+  the kiosk face the navigation state (``nav``, with the destination's ``title``) and the
+  ``captions`` of recent turns.
 - ``/ws/doa`` (public): speaker direction for the face's pupils.
 - ``/ws/live`` (operator): the live map's layers (map, pose, scan, plan, goal, people,
   localization health, navigation state, events).
@@ -31,7 +33,7 @@ router = APIRouter()
 PING_PERIOD_S = 5.0  # server ping on /ws/status (s)
 POLICY_VIOLATION = 1008  # WebSocket close code: refused (origin or login)
 
-STATUS_CHANNELS = ("battery", "ui_state", "ui_state_seed", "estop")
+STATUS_CHANNELS = ("battery", "ui_state", "ui_state_seed", "estop", "nav", "captions")
 LIVE_CHANNELS = (
     "map", "pose", "odom", "scan", "plan", "goal", "people", "loc", "nav", "estop", "teleop",
     "battery", "ui_state", "events",

@@ -4,6 +4,11 @@
 - ``POST /api/talk/audio`` (multipart field ``audio``: the browser's MediaRecorder WebM)
   → ffmpeg → 16 kHz → speech to text → the brain → ``{"transcript", "reply"}``.
 - ``POST /api/talk/say`` ``{"text": "..."}`` → the reply spoken, as ``audio/wav``.
+- ``GET /api/talk/robot_mic`` → ``{"available"}``; ``POST /api/talk/robot_mic`` ``{"text"}``:
+  in the simulator only, the words are spoken into the simulated robot's microphone
+  (``/sim/visitor_say``; the voice node synthesizes them), so the whole voice turn runs —
+  wake word, listening, thinking, speaking — as for a visitor standing at the robot.
+- Every typed or recorded turn is captioned on the kiosk face (the hub's ``captions``).
 - ``GET /api/talk_url`` → ``{"url", "secure"}``: the address of ``/talk`` for a phone (HTTPS
   at the robot's network address when TLS is on); ``GET /api/talk_qr.svg``: it as a QR code
   (the kiosk face shows it).
@@ -64,10 +69,12 @@ def _voice(module: str) -> Any:
 
 
 async def converse(request: Request, question: str) -> str:
-    """Ask the brain; its whole reply."""
-    bus = state_of(request).node.bus
+    """Ask the brain; its whole reply. The question and the reply are captioned on the face."""
+    st = state_of(request)
+    bus = st.node.bus
     if not bus.actions.has(topics.CONVERSE):
         raise HTTPException(status_code=503, detail="the brain is not running")
+    st.hub.caption("visitor", question, "talk")
     handle = await bus.actions.send_goal(topics.CONVERSE, Text(question))  # never waits
     try:  # the bound covers the wait behind other visitors' questions and the answer
         result = await handle.result(CONVERSE_TIMEOUT_S)
@@ -77,7 +84,9 @@ async def converse(request: Request, question: str) -> str:
     if not result.ok:
         raise HTTPException(status_code=502, detail=f"the brain could not answer: {result.message}")
     value = result.value
-    return value.data if isinstance(value, Text) else str(value or "")
+    reply = value.data if isinstance(value, Text) else str(value or "")
+    st.hub.caption("robot", reply, "talk")
+    return reply
 
 
 def _question(text: Any) -> str:
@@ -113,6 +122,41 @@ async def talk_audio(request: Request, audio: UploadFile) -> dict[str, Any]:
         return {"transcript": "", "reply": "", "error": NOTHING_HEARD}
     reply = await converse(request, transcript.text)
     return {"transcript": transcript.text, "reply": reply}
+
+
+def wake_phrase(request: Request) -> str:
+    """The robot's first wake word as words ("hey jarvis"), from ``voice.wake_models``."""
+    models = state_of(request).node.settings.voice.wake_models
+    name = models[0].rsplit("/", 1)[-1].removesuffix(".onnx") if models else "hey_jarvis"
+    return " ".join(name.replace("_", " ").split()) or "hey jarvis"
+
+
+def robot_mic_available(request: Request) -> bool:
+    """The simulated robot's microphone takes words: the simulator runs and its voice node
+    listens on ``/sim/visitor_say`` (it subscribes only in simulation)."""
+    node = state_of(request).node
+    info = node.bus.topics().get(topics.SIM_VISITOR_SAY)
+    return bool(node.clock.is_simulated and info is not None and getattr(info, "subscribers", None))
+
+
+@router.get("/api/talk/robot_mic")
+async def robot_mic(request: Request) -> dict[str, Any]:
+    return {"available": robot_mic_available(request), "wake": wake_phrase(request)}
+
+
+@router.post("/api/talk/robot_mic")
+async def say_to_robot(request: Request) -> dict[str, Any]:
+    """Speak the words into the simulated robot's microphone (the answer comes from the robot:
+    its face and speaker, not this reply)."""
+    _limit(request)
+    question = _question((await json_body(request)).get("text"))
+    if not robot_mic_available(request):
+        raise HTTPException(status_code=409, detail="only the simulated robot has a microphone to speak into")
+    wake = wake_phrase(request)
+    words = question if question.lower().startswith(wake) else f"{wake}, {question}"
+    state_of(request).node.bus.publish(topics.SIM_VISITOR_SAY, Text(words))
+    _log.info("words spoken into the simulated microphone", client=client_key(request), chars=len(words))
+    return {"ok": True, "spoken": words}
 
 
 @router.post("/api/talk/say")

@@ -1,7 +1,10 @@
-// The kiosk face: phase, mouth from tts_viseme, pupils from the DOA angle, blinking, captions.
+// The kiosk face, the robot's screen: phase, mouth from tts_viseme, pupils from the DOA angle,
+// blinking; when idle an invitation (say the wake word or scan the QR code); captions of every
+// turn (the robot's microphone, /talk, typed) and announcement; while guiding a card with the
+// destination's title, distance, ETA and a Stop; the battery only when low (or to an operator).
 // DOA convention (seed): 0° behind, 90° left, 180° in front, 270° right. The face looks at
 // the speaker, so a speaker on the robot's left moves the pupils to the screen's right.
-import { $, api, batteryText, LiveSocket } from "./common.js";
+import { $, api, batteryText, el, LiveSocket } from "./common.js";
 
 const PUPIL_MAX_PX = 22; // pupil travel from the eye's centre (SVG units)
 const MOUTH_MIN = 5; // mouth half-height closed / fully open (SVG units)
@@ -9,6 +12,10 @@ const MOUTH_MAX = 38;
 const BLINK_MS = 140;
 const BLINK_EVERY_MS = [2500, 6000]; // random interval between blinks
 const PHASES = ["idle", "listening", "thinking", "speaking", "navigating", "error"];
+const CAPTIONS_SHOWN = 3; // caption lines under the face (the newest at the bottom)
+const BATTERY_LOW_PCT = 20; // the battery shows to visitors at or below this
+const DONE_SHOWN_MS = 4000; // an ended walk's last word ("Arrived", "Stopped") stays this long
+const WHO = { visitor: "You", robot: "SAGE" };
 
 function setPhase(phase) {
   if (!PHASES.includes(phase)) return;
@@ -45,19 +52,130 @@ function blinkLoop() {
   }, lo + Math.random() * (hi - lo));
 }
 
+let captions = [];
+
 function onState(msg) {
   setPhase(msg.phase);
   setMouth(msg.phase === "speaking" ? msg.tts_viseme : 0);
   $("heard").textContent = msg.asr_final || msg.asr_partial || "";
   $("reply").textContent = msg.llm_tokens || "";
   $("error").textContent = msg.phase === "error" ? msg.error_msg || "" : "";
+  showCaptions();
 }
+
+// ---------------------------------------------------------------- captions
+/** The newest caption lines, less those the running voice turn shows live (#heard, #reply). */
+function showCaptions() {
+  const live = new Set([$("heard").textContent, $("reply").textContent].filter(Boolean));
+  const shown = captions.filter((c) => !live.has(c.text)).slice(-CAPTIONS_SHOWN);
+  const log = $("caption-log");
+  const have = [...log.children].map((li) => li.dataset.id).join(",");
+  if (have === shown.map((c) => String(c.id)).join(",")) return; // unchanged: nothing re-announced
+  log.replaceChildren(
+    ...shown.map((c, i) => {
+      const kind = c.via === "announcement" ? "announcement" : c.who;
+      return el("li", { class: `${kind}${i < shown.length - 1 ? " old" : ""}`, "data-id": String(c.id),
+        "data-via": c.via || "" }, el("span", { class: "who" }, `${WHO[c.who] || c.who}:`), c.text);
+    }),
+  );
+  document.body.dataset.captions = String(captions.length ? captions[captions.length - 1].id : 0);
+}
+
+// ---------------------------------------------------------------- guiding
+let doneTimer = null;
+
+function distanceText(m) {
+  if (m === null || m === undefined || !(m > 0)) return ""; // 0 before the plan is known
+  return m >= 10 ? `${Math.round(m)} m to go` : `${m.toFixed(1)} m to go`;
+}
+
+function etaText(s) {
+  if (s === null || s === undefined || !(s > 0)) return "";
+  return s >= 90 ? `about ${Math.round(s / 60)} min` : `about ${Math.max(1, Math.round(s))} s`;
+}
+
+const NAV_WORDS = {
+  planning: "Finding the way…",
+  waiting_for_people: "Waiting for people to pass…",
+  recovering: "Finding a way around…",
+  lost: "I am not sure where I am…",
+};
+const DONE_WORDS = {
+  succeeded: "We are here.", canceled: "Stopped.", preempted: "Going somewhere else.", aborted: "I could not get there.",
+};
+
+function onNav(msg) {
+  const guide = $("guide");
+  clearTimeout(doneTimer);
+  if (msg.state === "idle" && !msg.done) return hideGuide();
+  const title = msg.title || msg.place || "";
+  $("guide-title").textContent = title;
+  $("guide-title").title = msg.place || ""; // the code name in the tooltip
+  document.body.dataset.navState = msg.state;
+  if (msg.done) {
+    $("guide-label").textContent = msg.state === "succeeded" ? "Arrived at" : "Was taking you to";
+    $("guide-progress").textContent = DONE_WORDS[msg.state] || msg.state;
+    $("guide-stop").hidden = true;
+    doneTimer = setTimeout(hideGuide, DONE_SHOWN_MS);
+  } else {
+    $("guide-label").textContent = "Taking you to";
+    const parts = [distanceText(msg.distance_remaining_m), etaText(msg.eta_s)].filter(Boolean);
+    $("guide-progress").textContent = NAV_WORDS[msg.state] || parts.join(" · ") || "On our way…";
+    $("guide-stop").hidden = false;
+    $("guide-stop").disabled = false;
+    $("guide-stop").textContent = "Stop";
+  }
+  guide.hidden = false;
+  document.body.dataset.guiding = "1";
+}
+
+function hideGuide() {
+  $("guide").hidden = true;
+  document.body.dataset.guiding = "0";
+  document.body.dataset.navState = "idle";
+}
+
+// A visitor may stop their own walk: /api/guide/stop is public and only cancels navigation.
+$("guide-stop").addEventListener("click", async () => {
+  const stop = $("guide-stop");
+  stop.disabled = true;
+  stop.textContent = "Stopping…";
+  const { ok, data } = await api("/api/guide/stop", {});
+  if (!ok) {
+    stop.disabled = false;
+    stop.textContent = "Stop";
+    $("guide-progress").textContent = data.error || "could not stop";
+  }
+});
+
+// ---------------------------------------------------------------- battery: visitors see it only when low
+let operator = false;
+
+/** The battery is low enough to tell a visitor (percent known, at most BATTERY_LOW_PCT, not charging). */
+export function batteryLow(msg) {
+  const pct = msg?.percentage;
+  return pct !== null && pct !== undefined && pct <= BATTERY_LOW_PCT && !msg.is_charging;
+}
+
+function onBattery(msg) {
+  $("battery").textContent = batteryText(msg);
+  const low = batteryLow(msg);
+  $("battery").classList.toggle("low", low);
+  $("battery-wrap").hidden = !(low || operator);
+}
+
+api("/api/whoami").then(({ ok, data }) => (operator = Boolean(ok && data.operator)));
 
 new LiveSocket("/ws/status", {
   onState: (up) => $("link").classList.toggle("up", up),
   onMessage: (msg) => {
     if (msg.type === "ui_state") onState(msg);
-    else if (msg.type === "battery") $("battery").textContent = batteryText(msg);
+    else if (msg.type === "battery") onBattery(msg);
+    else if (msg.type === "nav") onNav(msg);
+    else if (msg.type === "captions") {
+      captions = msg.items || [];
+      showCaptions();
+    }
   },
 });
 new LiveSocket("/ws/doa", { onMessage: (msg) => msg.type === "doa" && lookAt(msg.angle) });
@@ -100,7 +218,12 @@ api("/api/health").then(({ ok, data }) => {
   });
 });
 
-// ---------------------------------------------------------------- scan to talk
+// ---------------------------------------------------------------- say the wake word or scan
+api("/api/talk/robot_mic").then(({ ok, data }) => {
+  if (!ok || !data.wake) return;
+  $("wake").textContent = data.wake.replace(/\b\w/g, (c) => c.toUpperCase()); // "hey jarvis" -> "Hey Jarvis"
+});
+
 // The server draws /talk's address (https at the robot's network address) as a QR code.
 api("/api/talk_url").then(({ ok, data }) => {
   if (!ok || !data.url) return;

@@ -47,8 +47,25 @@ $("ask").addEventListener("submit", async (ev) => {
   const text = $("question").value.trim();
   if (!text) return;
   $("question").value = "";
+  if (!$("robot-mic").hidden && $("robot-mic-on").checked) return sayToRobot(text);
   $("status").textContent = "thinking…";
   answer(await api("/api/talk/text", { text }));
+});
+
+// ---------------------------------------------------------------- the simulated robot's microphone
+// In the simulator the typed words can be spoken into the robot's own (simulated) microphone, so
+// the face goes through listening, thinking and speaking as for a visitor standing at the robot.
+async function sayToRobot(text) {
+  $("status").textContent = "saying it to the robot…";
+  const { ok, data } = await api("/api/talk/robot_mic", { text });
+  $("status").textContent = ok ? `said to the robot: “${data.spoken}” — it answers on its face` : data.error || "could not say it";
+  if (ok) document.body.dataset.saidToRobot = String(Number(document.body.dataset.saidToRobot || 0) + 1);
+}
+
+api("/api/talk/robot_mic").then(({ ok, data }) => {
+  if (!ok || !data.available) return;
+  $("wake").textContent = data.wake;
+  $("robot-mic").hidden = false;
 });
 
 // ---------------------------------------------------------------- hold to talk
