@@ -129,15 +129,20 @@ class SimClock(Clock):
         if latency_s > 0:
             wake: asyncio.Future[None] = loop.create_future()
             heapq.heappush(self._waiters, (due, job, wake))
-            await asyncio.wait({thread})
+            # One suspension only, the wake-up at the due time (time never passes it before
+            # the thread is done): where the caller resumes never depends on when the thread
+            # finished.
             await wake
+            if not thread.done():  # the clock was stepped past it by hand
+                await asyncio.wait({thread})
             return thread.result()
         release: asyncio.Future[None] = loop.create_future()
         self._held[job] = release
         try:
-            await asyncio.wait({thread})
             if self._driven:
-                await release  # at the next step's hand-over, in offload order
+                await release  # set at a hand-over once the thread is done, in offload order
+            if not thread.done():  # not driven (or the run ended): the thread itself
+                await asyncio.wait({thread})
             return thread.result()
         finally:
             self._held.pop(job, None)
