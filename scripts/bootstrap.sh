@@ -67,6 +67,16 @@ AXE_DIR="$ROOT/tests/web/.axe"
 node_packages() {
   local have="$AXE_DIR/node_modules/axe-core/package.json"
   if [ -f "$have" ] && grep -q "\"version\": \"$AXE_VERSION\"" "$have"; then return 0; fi
+  if ! command -v npm >/dev/null; then  # npm often comes with Node.js itself, not the apt package
+    if [ "$(id -u)" -eq 0 ]; then
+      say "installing npm (for the web pages' accessibility checker)"
+      DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends npm >/dev/null
+    else
+      say "npm is missing (the tests' accessibility checker comes from the npm registry); run once:"
+      echo "  sudo apt-get update && sudo apt-get install -y npm"
+      exit 1
+    fi
+  fi
   say "installing axe-core $AXE_VERSION (accessibility checks of the web pages) into $AXE_DIR"
   mkdir -p "$AXE_DIR"
   npm install --silent --no-save --no-package-lock --no-audit --no-fund --prefix "$AXE_DIR" "axe-core@$AXE_VERSION"
