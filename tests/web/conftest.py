@@ -221,22 +221,31 @@ class SimRobot:
 
 
 @contextlib.contextmanager
-def sim_robot(tmp_path_factory: pytest.TempPathFactory, name: str, **kw: Any) -> Iterator[SimRobot]:
-    """A started :class:`SimRobot` with the test operator password and its own state folder."""
-    tmp = tmp_path_factory.mktemp(name)
+def operator_env(state_dir: Path) -> Iterator[None]:
+    """The test operator password and ``state_dir`` in the environment, restored after."""
     old = {k: os.environ.get(k) for k in ("SAGE_OPERATOR_PASSWORD", "SAGE_STATE_DIR")}
     os.environ["SAGE_OPERATOR_PASSWORD"] = PASSWORD
-    os.environ["SAGE_STATE_DIR"] = str(tmp / "state")
-    sim = SimRobot(tmp, **kw).start()
+    os.environ["SAGE_STATE_DIR"] = str(state_dir)
     try:
-        yield sim
+        yield
     finally:
-        sim.stop()
         for k, v in old.items():
             if v is None:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+@contextlib.contextmanager
+def sim_robot(tmp_path_factory: pytest.TempPathFactory, name: str, **kw: Any) -> Iterator[SimRobot]:
+    """A started :class:`SimRobot` with the test operator password and its own state folder."""
+    tmp = tmp_path_factory.mktemp(name)
+    with operator_env(tmp / "state"):
+        sim = SimRobot(tmp, **kw).start()
+        try:
+            yield sim
+        finally:
+            sim.stop()
 
 
 @pytest.fixture(scope="module")

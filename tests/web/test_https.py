@@ -38,7 +38,7 @@ from sage_robot.web.node import WEB_URL, WebNode
 from sage_robot.web.talk import qr_svg
 
 from ..support.waits import until
-from .conftest import PASSWORD, artifacts_dir
+from .conftest import PASSWORD, artifacts_dir, operator_env
 
 START_TIMEOUT_S = 20.0
 WAIT_MS = 30_000
@@ -154,19 +154,12 @@ class WebServer:
 
 @contextlib.contextmanager
 def web_server(tmp: Path, web: dict[str, Any]) -> Iterator[WebServer]:
-    old = {k: os.environ.get(k) for k in ("SAGE_OPERATOR_PASSWORD", "SAGE_STATE_DIR")}
-    os.environ["SAGE_OPERATOR_PASSWORD"] = PASSWORD
-    os.environ["SAGE_STATE_DIR"] = str(tmp / "state")
-    server = WebServer({"host": "0.0.0.0", "port": 0, **web}, tmp / "state").start()
-    try:
-        yield server
-    finally:
-        server.stop()
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+    with operator_env(tmp / "state"):
+        server = WebServer({"host": "0.0.0.0", "port": 0, **web}, tmp / "state").start()
+        try:
+            yield server
+        finally:
+            server.stop()
 
 
 @pytest.fixture(scope="module")
