@@ -138,6 +138,33 @@ async def test_waits_for_a_person_then_goes_on(tmp_path) -> None:
         assert not sim.reversed_commands()
 
 
+async def test_excuse_me_once_when_someone_steps_back_in(tmp_path) -> None:
+    """Someone steps aside, then back in front of the robot: it waits again, quietly (a robot
+    that says "excuse me" at every retry nags; issue #20 counted 263 on one benchmark)."""
+    grid, settings = _building(tmp_path, NARROW, people_wait_s=30.0)
+    async with running(settings, grid, A) as (bus, clock, sim):
+        events = _events(bus)
+        sim.people.append([5.25, 2.0])
+        handle = await _go(bus, "ROOM_B")
+        waits = lambda: sum(e.kind == "blocked_by_people" for e in events)  # noqa: E731
+        await asyncio.wait_for(sim_until(clock, lambda: waits() == 1, "the first excuse me", 60),
+                               REAL_TIMEOUT_S)
+        sim.people.clear()  # they step aside ...
+        start_x = sim.pose[0]
+        await asyncio.wait_for(sim_until(clock, lambda: sim.pose[0] > start_x + 0.3, "driving on", 30),
+                               REAL_TIMEOUT_S)
+        sim.people.append([sim.pose[0] + 1.2, 2.0])  # ... and back in front of it
+        await asyncio.wait_for(
+            sim_until(clock, lambda: handle.last_feedback.state is NavState.WAITING_FOR_PEOPLE
+                      and abs(sim.cmds[-1][1].linear_x) < 1e-9, "waiting again", 30),
+            REAL_TIMEOUT_S)
+        await clock.sleep(2.0)
+        assert waits() == 1, [e.kind for e in events]
+        sim.people.clear()
+        result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
+        assert result.ok, result.message
+
+
 async def test_goes_around_a_person_who_never_moves(tmp_path) -> None:
     grid, settings = _building(tmp_path, WIDE, people_wait_s=5.0)
     async with running(settings, grid, A) as (bus, _clock, sim):
@@ -161,7 +188,8 @@ async def test_fully_blocked_corridor_aborts_with_a_reason(tmp_path) -> None:
         assert result.status is GoalStatus.ABORTED
         assert "blocked" in result.message
         assert "room b" in result.message
-        assert any(e.kind == "blocked_by_people" for e in events)
+        # "excuse me" once, then wait: not again at every rung of the recovery ladder
+        assert sum(e.kind == "blocked_by_people" for e in events) == 1, [e.kind for e in events]
         assert sim.collisions == 0
         assert not sim.reversed_commands()
         assert sim.cmds[-1][1].is_zero

@@ -62,6 +62,7 @@ CLEAR_SETTLE_S = 0.5  # after clearing the costmaps, let fresh scans come in (s)
 PLAN_DROP_WAIT_S = 5.0  # bound on waiting for a plan in flight when a drive ends (s)
 PLAN_LATENCY_S = 0.1  # time a plan may take (a Jetson's planner on a building map): in the
 #   simulator the robot drives on beside it and the plan arrives exactly this much later (s)
+EXCUSE_ME_AGAIN_S = 30.0  # "excuse me" at most this often on one goal: once, then wait (s)
 WATCH_PERIOD_S = 0.5  # how often the intended path is checked while waiting for people (s)
 WATCH_AHEAD_M = 8.0  # how much of the intended path must be free to go on (m)
 SPIN_SPEED_RADPS = 0.6
@@ -120,6 +121,7 @@ class GoalRun:
         self._level = 0
         self._level_xy: tuple[float, float] | None = None
         self._waited_s = 0.0  # waited for people since the ladder last reset (s)
+        self._asked_at = -math.inf  # when "excuse me" was last said on this goal (clock s)
         self._cleared = False  # the last wait ended because the path looked free
         self._first_blockers: np.ndarray | None = None  # what blocked the path at the wait's first look
         self._blocker_moved = False  # ... and whether it has moved since
@@ -356,7 +358,10 @@ class GoalRun:
                                 f"through ({exc})") from None
         self._first_blockers, self._blocker_moved, self._blocker_sizes = None, False, []
         self.feedback(NavState.WAITING_FOR_PEOPLE)
-        node.event("blocked_by_people", "excuse me, may I pass?", place=self.target.name)
+        now = self.clock.now()
+        if now - self._asked_at >= EXCUSE_ME_AGAIN_S:  # once, then wait (not at every retry)
+            self._asked_at = now
+            node.event("blocked_by_people", "excuse me, may I pass?", place=self.target.name)
         t0, before = self.clock.now(), self._waited_s
         wait_s = node.settings.nav.people_wait_s - before
         while self.clock.now() - t0 < wait_s:
