@@ -8,10 +8,14 @@ takes seconds.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
+import contextlib
+import contextvars
 import heapq
 import inspect
 import itertools
 import logging
+import os
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Awaitable, Callable
@@ -24,6 +28,11 @@ TIME_EPS_S = 1e-9  # deadlines this close to "now" count as reached (float steps
 LAG_WARN_S = 2.0  # a paced simulation this far behind its real-time factor says so
 LAG_WARN_EVERY_S = 30.0  # ... at most once per this many wall seconds
 LAG_REBASE_S = 0.2  # further behind than this, a paced simulation slows down instead of catching up
+# A simulated step waits for the offloaded jobs due by then with the event loop held, so that
+# no task can run more or less while a job computes (that would depend on the machine's
+# load); after this long it lets the loop turn once (Ctrl-C) and holds it again.
+JOB_HOLD_S = 5.0
+JOB_WORKERS = min(32, (os.cpu_count() or 1) + 4)  # threads for offloaded jobs (as asyncio's default)
 
 _log = logging.getLogger("sage.clock")
 
@@ -104,7 +113,11 @@ class SimClock(Clock):
         self._now = start
         self._waiters: list[tuple[float, int, asyncio.Future[None]]] = []
         self._seq = itertools.count()
-        self._jobs: dict[int, float] = {}  # offloaded jobs running now -> when they are due
+        # offloaded jobs not yet handed over -> (when they are due, the thread's future); a
+        # job's state is read from its concurrent future, never from a loop callback (those
+        # come in whenever the thread happens to finish)
+        self._jobs: dict[int, tuple[float, concurrent.futures.Future[Any]]] = {}
+        self._executor: concurrent.futures.ThreadPoolExecutor | None = None
         self._jobs_done: asyncio.Event | None = None
         # callers of finished jobs due at once, waiting to be handed their results (job order)
         self._held: dict[int, asyncio.Future[None]] = {}
@@ -121,11 +134,14 @@ class SimClock(Clock):
         job = next(self._seq)
         self.offloaded += 1
         due = self._now + max(0.0, latency_s)
-        self._jobs[job] = due
-        thread = asyncio.ensure_future(asyncio.to_thread(fn, *args))
+        if self._executor is None:
+            self._executor = concurrent.futures.ThreadPoolExecutor(JOB_WORKERS, thread_name_prefix="offload")
+        # The caller's context goes along (which node logs), as asyncio.to_thread does.
+        thread = self._executor.submit(contextvars.copy_context().run, fn, *args)
         # Time waits for the thread itself, also when its caller was cancelled (a replan given
         # up): the thread goes on touching what it was given, so no step may pass it by.
-        thread.add_done_callback(lambda t: self._thread_done(job, t))
+        self._jobs[job] = (due, thread)
+        thread.add_done_callback(lambda _t: self._signal_from_thread(loop))
         if latency_s > 0:
             wake: asyncio.Future[None] = loop.create_future()
             heapq.heappush(self._waiters, (due, job, wake))
@@ -134,7 +150,7 @@ class SimClock(Clock):
             # finished.
             await wake
             if not thread.done():  # the clock was stepped past it by hand
-                await asyncio.wait({thread})
+                await asyncio.wrap_future(thread)
             return thread.result()
         release: asyncio.Future[None] = loop.create_future()
         self._held[job] = release
@@ -142,29 +158,45 @@ class SimClock(Clock):
             if self._driven:
                 await release  # set at a hand-over once the thread is done, in offload order
             if not thread.done():  # not driven (or the run ended): the thread itself
-                await asyncio.wait({thread})
+                await asyncio.wrap_future(thread)
             return thread.result()
         finally:
             self._held.pop(job, None)
 
-    def _thread_done(self, job: int, thread: asyncio.Future[Any]) -> None:
-        if not thread.cancelled():
-            thread.exception()  # taken by the caller's result(); not "never retrieved" if it left
-        self._job_done(job)
+    def _signal_from_thread(self, loop: asyncio.AbstractEventLoop) -> None:
+        """A job's thread finished (runs in that thread): wake a hook's hand-over wait."""
+        if not loop.is_closed():
+            with contextlib.suppress(RuntimeError):  # closed in between: nobody waits any more
+                loop.call_soon_threadsafe(self._job_finished_signal)
 
-    def _job_done(self, job: int) -> None:
-        self._jobs.pop(job, None)
+    def _job_finished_signal(self) -> None:
         if self._jobs_done is not None:
             self._jobs_done.set()
 
+    def _running(self, job: int) -> bool:
+        entry = self._jobs.get(job)
+        return entry is not None and not entry[1].done()
+
+    def _forget_done(self) -> None:
+        for job in [j for j, (_, thread) in self._jobs.items() if thread.done()]:
+            thread = self._jobs.pop(job)[1]
+            if not thread.cancelled():
+                thread.exception()  # taken by the caller's result(); not "never retrieved" if it left
+
     async def _wait_for_jobs(self, t: float) -> None:
         """Until no running job is due by ``t``, handing finished jobs due at once their
-        results on the way (:meth:`_hand_over`)."""
+        results on the way (:meth:`_hand_over`). The wait holds the event loop (bounded by
+        ``JOB_HOLD_S``, then one turn): no task gets more turns on a slow machine than on a
+        fast one."""
         while True:
             await self._hand_over()
-            if not any(due <= t + TIME_EPS_S for due in self._jobs.values()):
+            self._forget_done()
+            due_now = [thread for due, thread in self._jobs.values() if due <= t + TIME_EPS_S]
+            if not due_now:
                 return
-            await self._job_finished()
+            _, running = concurrent.futures.wait(due_now, timeout=JOB_HOLD_S)
+            if running:
+                await asyncio.sleep(0)
 
     async def _hand_over_until(self, hook: asyncio.Future[Any]) -> None:
         """Await an ``on_step`` hook, handing over results meanwhile (the node it waits for
@@ -183,9 +215,6 @@ class SimClock(Clock):
         self._jobs_done.clear()
         return self._jobs_done
 
-    async def _job_finished(self) -> None:
-        await self._armed().wait()
-
     async def _hand_over(self) -> None:
         """Hand the callers of finished jobs due at once their results, strictly in offload
         order (a job still running holds back every later one), each caller going on from its
@@ -193,7 +222,7 @@ class SimClock(Clock):
         whenever a thread happens to finish, so the interleaving is the same on every run."""
         while True:
             first = min(self._held, default=None)
-            if first is None or first in self._jobs:  # none waiting, or the first still runs
+            if first is None or self._running(first):  # none waiting, or the first still runs
                 return
             release = self._held.pop(first)
             if not release.done():

@@ -33,7 +33,7 @@ import numpy as np
 
 from sage_robot.core.node import SIM_STEP_HOOKS, Node
 from sage_robot.core.resources import ResourceKey
-from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
+from sage_robot.hardware.mcu.bridge import PORT_RESOURCE, TX_COUNT_RESOURCE, TxCount
 from sage_robot.sim.firmware import FirmwareModel, SimFirmware, make_firmware
 from sage_robot.sim.flat_floor import FlatFloor, SimBody
 
@@ -117,11 +117,20 @@ class PtyMcu:
     """A pty pair with the firmware model on the master side. ``base``: where the link's
     directory goes (default :func:`runtime_dir`; stale ones there are removed first)."""
 
-    def __init__(self, firmware: SimFirmware, base: Path | None = None, lockstep: bool = False) -> None:
+    def __init__(
+        self,
+        firmware: SimFirmware,
+        base: Path | None = None,
+        lockstep: bool = False,
+        tx: TxCount | None = None,
+    ) -> None:
         self.firmware = firmware
         # lockstep (a simulated clock): each write is readable on the Jetson side before pump()
-        # returns, so the bridge reads it at the same simulated time on every run.
+        # returns, so the bridge reads it at the same simulated time on every run; and every
+        # byte the bridge wrote before a pump (``tx``, its running count) is read by that pump.
         self.lockstep = lockstep
+        self.tx = tx
+        self._rx_total = 0  # bytes read from the Jetson side, in TxCount's reckoning
         base = base if base is not None else runtime_dir()
         if base is not None:
             remove_stale_links(base)
@@ -146,6 +155,7 @@ class PtyMcu:
         os.set_blocking(master, False)
         self.master_fd, self._slave_fd = master, slave
         self.slave_name = os.ttyname(slave)
+        self._rx_total = self.tx.total if self.tx is not None else 0  # earlier bytes were not for this pty
         tmp = self.port_name + ".new"
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
@@ -160,6 +170,10 @@ class PtyMcu:
         """Non-blocking: Jetson bytes -> firmware; the firmware's due frames -> Jetson."""
         if not self.plugged:
             return
+        tx = self.tx
+        on_the_way = tx.total - self._rx_total if self.lockstep and tx is not None else 0
+        if tx is not None and on_the_way > 0 and not self._wait_readable(on_the_way, self.master_fd):
+            self._rx_total = tx.total  # lost on the way (a write that failed half-way)
         while True:
             try:
                 data = os.read(self.master_fd, READ_CHUNK)
@@ -167,6 +181,7 @@ class PtyMcu:
                 break
             if not data:
                 break
+            self._rx_total += len(data)
             self.firmware.receive(data)
         fw = self.firmware
         odom_before = fw.frames_sent["ODOM"]
@@ -187,21 +202,25 @@ class PtyMcu:
             self.bytes_dropped += len(out) - written
             self.writes += 1
 
-    def _readable(self) -> int:
-        """Bytes waiting on the Jetson side of the pty (FIONREAD)."""
+    def _readable(self, fd: int | None = None) -> int:
+        """Bytes waiting to be read on ``fd`` (FIONREAD; default the Jetson side of the pty)."""
         buf = array.array("i", [0])
         try:
-            fcntl.ioctl(self._slave_fd, termios.FIONREAD, buf, True)
+            fcntl.ioctl(self._slave_fd if fd is None else fd, termios.FIONREAD, buf, True)
         except OSError:
             return 0
         return int(buf[0])
 
-    def _wait_readable(self, count: int) -> None:
-        """The kernel hands pty bytes over in a worker of its own: wait (bounded) until they
-        are readable, so that a read in this simulated step finds them all."""
+    def _wait_readable(self, count: int, fd: int | None = None) -> bool:
+        """The kernel hands pty bytes over in a worker of its own: wait (bounded) until
+        ``count`` bytes are readable on ``fd`` (default the Jetson side), so that a read in this
+        simulated step finds them all. False when they did not come in time."""
         deadline = time.monotonic() + LOCKSTEP_WAIT_S
-        while self._readable() < count and time.monotonic() < deadline:
+        while self._readable(fd) < count:
+            if time.monotonic() >= deadline:
+                return False
             time.sleep(LOCKSTEP_POLL_S)
+        return True
 
     def inject(self, data: bytes) -> None:
         """Write raw bytes toward the Jetson (tests: corrupt the line)."""
@@ -255,7 +274,8 @@ class McuSimNode(Node):
                 firmware=dialect, firmware_track_m=fw_track, body_track_m=robot.track_width_m,
             )
         self.floor = FlatFloor(robot.track_width_m)
-        self.pty = PtyMcu(self.firmware, lockstep=self.clock.is_simulated)
+        tx = self.ctx.resources.setdefault(TX_COUNT_RESOURCE, TxCount())
+        self.pty = PtyMcu(self.firmware, lockstep=self.clock.is_simulated, tx=tx)
         self.ctx.resources[PORT_RESOURCE] = self.pty.port_name
         self.ctx.resources[MCU_SIM_RESOURCE] = self
         self._hooks = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])

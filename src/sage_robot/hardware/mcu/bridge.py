@@ -64,6 +64,20 @@ from sage_robot.hardware.mcu.dialects import BannerWatch, dialect
 from sage_robot.hardware.mcu.port import HEARTBEAT_PERIOD_S, find_port, heartbeat_fd, open_port
 
 PORT_RESOURCE = ResourceKey("mcu_port", str)  # a port path set by the simulator (or a bench)
+
+
+class TxCount:
+    """Bytes this process's bridge has written to its port, ever. A simulated MCU in the same
+    process reads it to know how many bytes are on their way to it: the kernel hands pty
+    bytes over in a worker of its own, so "readable now" alone would depend on the load."""
+
+    __slots__ = ("total",)
+
+    def __init__(self) -> None:
+        self.total = 0
+
+
+TX_COUNT_RESOURCE = ResourceKey("mcu_tx_bytes", TxCount)
 CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
 TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
 LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
@@ -89,6 +103,7 @@ class SerialBridgeNode(Node):
         self.decoder = proto.Decoder(accept=FROM_MCU)
         self._port: Any = None
         self.port_path = ""
+        self.tx_count = self.ctx.resources.setdefault(TX_COUNT_RESOURCE, TxCount())
         self._rx_thread: threading.Thread | None = None
         self._rx_stop = threading.Event()
         self._lost = threading.Event()
@@ -214,7 +229,7 @@ class SerialBridgeNode(Node):
         if self._realign_pending:
             data, self._realign_pending = self.dialect.realign_step() + data, False
         try:
-            port.write(data)
+            self.tx_count.total += port.write(data) or 0
             self.counters["cmd_sent"] += 1
         except serial.SerialTimeoutException:
             self.counters["write_timeouts"] += 1
