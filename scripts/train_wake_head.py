@@ -20,8 +20,12 @@ from every evaluation set:
   are left out). Four noisy copies each: white, pink, brown noise or the babble of
   four other talkers at -2..20 dB SNR, random gain; the same frames are positive.
 - Negatives: sentences of the knowledge base and confusable phrases ("hey Travis",
-  "Harvey", "jars", and greetings like "hey, can you help me?") in the same voices, clean and in noise; babble of three talkers
-  that includes a confusable; noise alone; the noise before each positive phrase.
+  "Harvey", "jars", and greetings like "hey, can you help me?") in the same voices and in
+  Piper's with its own random prosody (seeded), clean and in noise; babble of three talkers
+  (espeak-ng and Piper voices) that includes a confusable; one talker in the babble of
+  others; noise alone; the noise before each positive phrase. (Issue #22: the babble of
+  Piper talkers reached 0.77-0.86 with the gate open in ``sage bench voice``, against the
+  head's 0.9 threshold; these negatives widen that margin.)
 """
 
 from __future__ import annotations
@@ -54,33 +58,44 @@ RATES_WPM = (130, 155, 185, 205)
 PIPER_SPEEDS = (0.75, 0.95, 1.1, 1.25, 1.4)
 PHRASES = ("Hey Jarvis!", "Hey Jarvis, where is the cafe?", "Hey Jarvis, take me to the machine shop.",
            "Hey, Jarvis.", "Hey Jarvis?")  # fmt: skip
-CONFUSABLE = ("Hey Travis, wait for me.", "Hey Marvin!", "Harvey, come here.", "Jars of jam are on the shelf.",
-              "Hey there, how are you?", "Hey Mavis, over here.", "Service is closed today.", "Hey Charlie!",
-              "A jar is on the desk.", "Hey, are you the tour robot?", "Harvest time is in the fall.",
-              "Jarrett has the keys.",
+CONFUSABLE = ("Hey Travis, wait for me.", "Hey Marvin!", "Harvey, come here.",
+              "Jars of jam are on the shelf.", "Hey there, how are you?", "Hey Mavis, over here.",
+              "Service is closed today.", "Hey Charlie!", "A jar is on the desk.",
+              "Hey, are you the tour robot?", "Harvest time is in the fall.", "Jarrett has the keys.",
               # Visitors greet the robot with "hey" all the time:
-              "Hey, can you help me?", "Hey, where are you going?", "Hey guys, wait up!", "Hey, is this the robot?",
-              "Hey, are we there yet?", "Hey, how's it going?", "Hey, do you know the way?", "Hey Jack, over here.",
-              "Hey, Jasmine!", "Hey, what's this room?", "Hey, are you listening?", "Hey, nice to see you.")  # fmt: skip
+              "Hey, can you help me?", "Hey, where are you going?", "Hey guys, wait up!",
+              "Hey, is this the robot?", "Hey, are we there yet?", "Hey, how's it going?",
+              "Hey, do you know the way?", "Hey Jack, over here.", "Hey, Jasmine!",
+              "Hey, what's this room?", "Hey, are you listening?", "Hey, nice to see you.")  # fmt: skip
 LABEL_SCORE = 0.5  # clean-rendering frames the bundled model scores this high are positives
 NOISY_COPIES = 4
 SNR_DB = (-2.0, 20.0)
 C_REGULARISATION = 0.002  # inverse L2 strength of the logistic regression
+PIPER_TALKER_SHARE = 0.5  # negatives and babble talkers in Piper's (random-prosody) voice
+PIPER_NEG_SPEEDS = (0.8, 1.35)  # length scales of those
+BABBLES = 40  # babble negatives per part (three talkers, one confusable)
+FOREGROUND_IN_BABBLE = 16  # negatives per part: one talker over the babble of others
+BABBLE_FG_SNR_DB = (0.0, 12.0)
 
 
 class Maker:
     """Speech, noise and embedding windows for one worker (its own random stream)."""
 
     def __init__(self, part: int) -> None:
+        import onnxruntime as ort
+
         from sage_robot.voice.tts import PiperEngine
         from sage_robot.voice.wake import OpenWakeWordEngine
 
+        ort.set_seed(SEED + part)  # Piper's random prosody below, seeded: reproducible
         self.rng = np.random.default_rng([SEED, part])
         self.piper = PiperEngine(deterministic=True)  # no random prosody: reproducible
+        self.piper_varied = PiperEngine(deterministic=False)  # the voice's own prosody noise
         self.engine = OpenWakeWordEngine(["hey_jarvis"])
         self.sentences = kb_sentences()
         picks = self.rng.choice(len(self.sentences), 12, replace=False)
-        self.pool = [self.espeak(self.sentences[i], self.voice(), 170, 50) for i in picks]
+        self.pool = [self.espeak(self.sentences[i], self.voice(), 170, 50) for i in picks[:8]]
+        self.pool += [self.varied_piper(self.sentences[i]) for i in picks[8:]]
 
     def voice(self) -> str:
         return VOICES[int(self.rng.integers(len(VOICES)))]
@@ -96,6 +111,20 @@ class Maker:
     def random_espeak(self, text: str) -> np.ndarray:
         wpm = int(self.rng.choice(RATES_WPM))
         return self.espeak(text, self.voice(), wpm, int(self.rng.integers(25, 75)))
+
+    def varied_piper(self, text: str) -> np.ndarray:
+        """Piper with its random prosody at a random speed (the robot's voice in a crowd)."""
+        from sage_robot.voice.audio_io import resample
+
+        self.piper_varied.length_scale = float(self.rng.uniform(*PIPER_NEG_SPEEDS))
+        pcm = self.piper_varied.synthesize_sentence(text)
+        return resample(pcm, self.piper_varied.sample_rate, RATE).astype(np.float64)
+
+    def talker(self, text: str) -> np.ndarray:
+        """A negative talker: Piper (varied) or a random espeak-ng voice."""
+        if self.rng.random() < PIPER_TALKER_SHARE:
+            return self.varied_piper(text)
+        return self.random_espeak(text)
 
     def piper_say(self, text: str, speed: float) -> np.ndarray:
         from sage_robot.voice.audio_io import resample
@@ -155,8 +184,8 @@ class Maker:
     def negatives(self, texts: list[str], babbles: int, noises: int) -> list[np.ndarray]:
         neg = []
         for text in texts:
-            if self.rng.random() < 0.85:
-                pcm = self.random_espeak(text)
+            if self.rng.random() < 0.7:
+                pcm = self.talker(text)
             else:
                 pcm = self.piper_say(text, float(self.rng.uniform(0.8, 1.3)))
             x = np.concatenate([np.zeros(RATE // 2), pcm, np.zeros(RATE // 2)])
@@ -171,11 +200,31 @@ class Maker:
             said += [self.sentences[i] for i in self.rng.choice(len(self.sentences), 2)]
             for text in said:
                 off = int(self.rng.integers(0, RATE))
-                seg = self.random_espeak(text)[: n - off]
+                seg = self.talker(text)[: n - off]
                 x[off : off + len(seg)] += seg * self.rng.uniform(0.3, 0.6)
             neg.append(self.windows(x)[0][2:])
+        neg += self.foreground_in_babble(FOREGROUND_IN_BABBLE)
         for _ in range(noises):
             neg.append(self.windows(self.noise(5 * RATE) * self.rng.uniform(100, 3000))[0][2:])
+        return neg
+
+
+    def foreground_in_babble(self, count: int) -> list[np.ndarray]:
+        """One talker (a confusable or a KB sentence) over the babble of four others."""
+        neg = []
+        for _ in range(count):
+            pool = CONFUSABLE if self.rng.random() < 0.5 else self.sentences
+            pcm = self.talker(pool[int(self.rng.integers(len(pool)))])
+            x = np.concatenate([np.zeros(RATE // 2), pcm, np.zeros(RATE // 2)])
+            snr = self.rng.uniform(*BABBLE_FG_SNR_DB)
+            sig = float(np.sqrt(np.mean(pcm**2)))
+            bab = np.zeros(len(x))
+            for j in self.rng.choice(len(self.pool), 4, replace=False):
+                src = np.tile(self.pool[j], len(x) // len(self.pool[j]) + 2)
+                off = int(self.rng.integers(0, len(self.pool[j])))
+                bab += src[off : off + len(x)]
+            bab *= sig / 10 ** (snr / 20) / (float(np.sqrt(np.mean(bab**2))) + 1e-9)
+            neg.append(self.windows(x + bab)[0][2:])
         return neg
 
 
@@ -197,7 +246,7 @@ def make_part(part: int) -> tuple[np.ndarray, np.ndarray, int, int]:
             sources.append(m.piper_say(phrase, speed))
     pos, neg, kept = m.positives(sources)
     texts = [m.sentences[i] for i in m.rng.choice(len(m.sentences), 20)] + list(CONFUSABLE) * 3
-    neg += m.negatives(texts, babbles=20, noises=6)
+    neg += m.negatives(texts, babbles=BABBLES, noises=6)
     return np.concatenate(pos), np.concatenate(neg), kept, len(sources)
 
 

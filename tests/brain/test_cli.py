@@ -109,7 +109,7 @@ def test_ask_sim_starts_only_the_robot_navigation_and_kb() -> None:
     proc = sage("ask", "take me to the cafe", "--sim", "--json")
     assert proc.returncode == 0, proc.stderr[-2000:]
     data = json.loads(proc.stdout)
-    assert data["reply"] == "Sure, follow me to the Guelly Delly!"
+    assert data["reply"] == "Sure, follow me to the Guelly Delly café!"
     goal = data["tool_calls"][0]
     assert goal["name"] == "set_goal"
     assert goal["ok"]

@@ -92,7 +92,7 @@ async def test_estop_engaged_refuses_to_drive_and_released_drives() -> None:
         assert nav.goals == []
         assert nav.tours == []  # no goal was ever sent
         estop(bus, False)
-        assert await ask(bus, "take me to the cafe") == "Sure, follow me to the Guelly Delly!"
+        assert await ask(bus, "take me to the cafe") == "Sure, follow me to the Guelly Delly café!"
         await until(lambda: nav.goals == ["GUELLY_DELLY"])
         assert (await ask(bus, "where are you going")).startswith("I am on my way to the Guelly Delly")
     finally:
@@ -227,7 +227,7 @@ async def test_a_goal_navigation_aborts_at_once_is_not_followed() -> None:
     node = await start(bus)
     try:
         reply = await ask(bus, "take me to the cafe")
-        assert reply == "Sorry, I can not take you to the Guelly Delly: I don't know where I am yet."
+        assert reply == "Sorry, I can not take you to the Guelly Delly café: I don't know where I am yet."
         await asyncio.sleep(0.05)
         assert said == []  # announced once, in the reply, not again on /sage/say
         assert not node.robot.nav.navigating

@@ -43,7 +43,9 @@ def test_phrasing_sets_are_well_formed_and_disjoint() -> None:
                 assert r[2] in PLACES, r
     assert not {r[0] for r in dev} & {str(r[0]) for r in held}
     covered = {r[1] for r in dev}
-    assert covered == set(INTENTS)
+    # "suggest" and "clarify" come from the dialogue state and the semantic guess, not the
+    # rules alone: the dialogue sets (dialogues_dev.yaml, test_dialogue.py) cover them.
+    assert covered == set(INTENTS) - {"suggest", "clarify"}
 
 
 @pytest.mark.parametrize(
@@ -164,7 +166,7 @@ async def test_places_come_from_the_bus_service_before_the_file(brain, nav) -> N
     nav.places = Places([p for p in seed_places() if p.name in ("CLEAN_ROOM", "BATHROOMS")])
     assert (await brain.robot.places()).names() == ["CLEAN_ROOM", "BATHROOMS"]
     result = await brain.respond("what places can you take me to")
-    assert result.reply == "I can take you to the Clean Room and the Bathrooms. Where would you like to go?"
+    assert result.reply == "I can take you to the Clean Room and the bathrooms. Where would you like to go?"
 
 
 async def test_where_am_i_before_any_pose_estimate(brain, nav) -> None:

@@ -46,7 +46,7 @@ async def test_take_me_to_the_cafe_arrives_and_welcomes() -> None:
 
     launcher = await asyncio.wait_for(run_launcher(ctx, specs, until=SIM_LIMIT_S, after_start=after_start),
                                       WALL_LIMIT_S)  # fmt: skip
-    assert reply == ["Sure, follow me to the Guelly Delly!"]
+    assert reply == ["Sure, follow me to the Guelly Delly café!"]
     assert [e.data.get("place") for e in arrived] == ["GUELLY_DELLY"], said
     assert said[0].startswith("Here we are at the Guelly Delly, engineering student café")
     assert ctx.clock.now() < SIM_LIMIT_S

@@ -16,7 +16,8 @@ from sage_robot.core.paths import package_data
 from .conftest import make_tools, until
 
 EXPECTED = {"set_goal", "cancel_goal", "kb_search", "web_search", "get_ip_address", "where_am_i",
-            "battery_status", "list_places", "start_tour", "describe_place"}  # fmt: skip
+            "battery_status", "list_places", "start_tour", "describe_place",
+            "plan_tour", "tour_control"}  # fmt: skip
 
 
 @pytest.fixture

@@ -70,6 +70,9 @@ ALLOWED: dict[str, Edge] = {
     "web-slam-save-request": ("sage_robot.web.slam_api", "sage_robot.nav.slam.messages"),
     "web-slam-topics": ("sage_robot.web.slam_api", "sage_robot.nav.slam.node"),
     "web-slam-map-name": ("sage_robot.web.slam_api", "sage_robot.nav.slam.store"),
+    # ... and lists saved maps / writes a saved map's tour profile (file work, no bus: the admin
+    # chooses a tour map while no slam node runs); it belongs beside core.paths/core.places.
+    "web-slam-tour-map": ("sage_robot.web.slam_api", "sage_robot.nav.slam.tour"),
     # The voice node builds the simulated microphone and speaker itself when the profile
     # says sim (a lazy import); the launcher should hand it its audio devices instead.
     "voice-builds-sim-audio": ("sage_robot.voice.node", "sage_robot.sim.audio"),

@@ -11,7 +11,7 @@ import pytest
 from sage_robot.core.audio import FRAME_S, FRAME_SAMPLES
 from sage_robot.core.errors import ConfigError
 from sage_robot.voice.audio_io import Framer, load_audio, resample
-from sage_robot.voice.stt import SpeechToText, Transcript, transcribe_pcm
+from sage_robot.voice.stt import NO_SPEECH, SpeechToText, Transcript, transcribe_pcm
 from sage_robot.voice.vad import EndReason, SileroVad, Utterance, UtteranceRecorder
 from sage_robot.voice.wake import WakeDetector
 
@@ -68,8 +68,10 @@ def test_librivox_recordings_word_error_rate(models, pocketsphinx_data):
 )
 def test_silence_and_noise_give_no_words(models, clip):
     result = models.stt.transcribe(clip)
-    assert result == Transcript("", duration_s=len(clip) / 16000, elapsed_s=result.elapsed_s)
+    assert result == Transcript("", duration_s=len(clip) / 16000, elapsed_s=result.elapsed_s,
+                                rejected=NO_SPEECH)  # fmt: skip
     assert result.empty
+    assert not result.unclear
     assert result.no_speech_prob == 1.0
 
 

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sage_robot.core import topics
-from sage_robot.core.bus import Bus
+from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.log import get_logger
 from sage_robot.core.msgs import (
     DiagnosticArray,
@@ -31,12 +31,14 @@ from sage_robot.core.msgs import (
     Twist,
 )
 from sage_robot.core.node import CURRENT_NODE, LAUNCHER, Health, Node, NodeContext, NodeState
+from sage_robot.core.resources import ResourceKey
 
 BACKOFF_INITIAL_S = 0.5
 BACKOFF_MAX_S = 10.0
 STABLE_AFTER_S = 30.0  # a node that ran this long starts again from the initial backoff
 DIAGNOSTICS_PERIOD_S = 1.0
 TEARDOWN_TIMEOUT_S = 3.0
+HEALTH_TOPIC: ResourceKey[Topic[HealthReport]] = ResourceKey("health_topic", doc="where the launcher reports")
 
 _LEVEL = {
     NodeState.RUNNING: Level.OK,
@@ -59,11 +61,15 @@ class NodeSpec:
 
 
 class Launcher:
-    def __init__(self, ctx: NodeContext, specs: list[NodeSpec]) -> None:
+    def __init__(
+        self, ctx: NodeContext, specs: list[NodeSpec], health_topic: Topic[HealthReport] | None = None
+    ) -> None:
         names = [s.name for s in specs]
         if len(set(names)) != len(names):
             raise ValueError(f"duplicate node names in {names}")
         self.ctx, self.specs = ctx, specs
+        # A process group reports on its own topic (app.group_main); the supervisor merges them.
+        self.health_topic = health_topic or ctx.resources.get(HEALTH_TOPIC) or topics.HEALTH
         self.bus: Bus = ctx.bus
         self.log = get_logger("launcher")
         self.health: dict[str, Health] = {s.name: Health(s.name, critical=s.critical) for s in specs}
@@ -75,7 +81,7 @@ class Launcher:
         self._rates: dict[tuple[str, str], float] = {}  # (node, topic) -> Hz over the last period
         self._rate_base: tuple[float, dict[tuple[str, str], int]] = (ctx.clock.now(), {})
         self._remove_tap = ctx.bus.add_tap(self._count)
-        self.bus.declare(topics.HEALTH, latched=True)
+        self.bus.declare(self.health_topic, latched=True)
         ctx.resources[LAUNCHER] = self
 
     # ---------------------------------------------------------------- public
@@ -253,7 +259,7 @@ class Launcher:
         (not counted as the node's whose state just changed)."""
         token = CURRENT_NODE.set("")
         try:
-            self.bus.publish(topics.HEALTH, self.health_msg())
+            self.bus.publish(self.health_topic, self.health_msg())
         except Exception:  # a report that cannot go out must not stop the supervision
             self.log.exception("cannot publish the health report")
         finally:

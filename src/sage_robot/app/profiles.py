@@ -21,6 +21,7 @@ PROFILES: dict[str, list[tuple[str, bool]]] = {
         ("web", True),
         ("kb", False),
         ("brain", False),
+        ("tour", False),
         ("voice", False),
     ],
     # The real robot on a tour (the seed's start_robot.sh).
@@ -37,6 +38,7 @@ PROFILES: dict[str, list[tuple[str, bool]]] = {
         ("web", True),
         ("kb", False),
         ("brain", False),
+        ("tour", False),
         ("voice", False),
     ],
     # The real robot building a map (the seed's slam_robot.sh).

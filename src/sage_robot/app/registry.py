@@ -25,8 +25,10 @@ NODES: dict[str, str] = {
     "serial_bridge": "sage_robot.hardware.mcu.bridge:SerialBridgeNode",
     "web": "sage_robot.web.node:WebNode",
     "brain": "sage_robot.brain.node:BrainNode",
+    "tour": "sage_robot.brain.tour_runner:TourNode",
     "slam": "sage_robot.nav.slam.node:SlamNode",
     "voice": "sage_robot.voice.node:VoiceNode",
+    "ros2_bridge": "sage_robot.app.ros2_bridge:Ros2BridgeNode",  # off by default: `sage sim --ros2`
 }
 
 # Which extra provides a node's module, for the message when its import fails.

@@ -9,7 +9,7 @@ from typing import Any
 from sage_robot.app.launcher import Launcher, NodeSpec
 from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import node_class
-from sage_robot.core.bus import Bus
+from sage_robot.core.bus import Bus, LocalTransport, Transport
 from sage_robot.core.clock import Clock, SimClock, WallClock
 from sage_robot.core.config import Settings
 from sage_robot.core.errors import ConfigError
@@ -25,9 +25,24 @@ def specs_for(mode: str, extra: list[str] | None = None) -> list[NodeSpec]:
     return [NodeSpec(name, node_class(name), critical) for name, critical in entries]
 
 
+def make_transport(settings: Settings) -> Transport:
+    """The bus's transport as the profile's ``bus.transport`` names it."""
+    if settings.bus.transport == "local":
+        return LocalTransport()
+    try:
+        from sage_robot.core.transport.zenoh_bus import ZenohTransport
+    except ImportError as exc:
+        raise ConfigError(
+            f"bus.transport: zenoh needs the zenoh extra (pip install 'sage-robot[zenoh]'): {exc}"
+        ) from None
+    from sage_robot.web.auth import operator_password
+
+    return ZenohTransport(settings.bus, lambda: operator_password(settings))
+
+
 def make_context(settings: Settings, simulated: bool) -> NodeContext:
     clock: Clock = SimClock() if simulated else WallClock()
-    ctx = NodeContext(Bus(clock), clock, settings)
+    ctx = NodeContext(Bus(clock, make_transport(settings)), clock, settings)
     ctx.resources[SIM_STEP_HOOKS] = []
     return ctx
 
@@ -38,7 +53,20 @@ async def run_launcher(
     until: float | None = None,
     after_start: Callable[[Launcher], Awaitable[Any]] | None = None,
 ) -> Launcher:
-    """Run nodes until a signal, or (simulated) until the clock reaches ``until``."""
+    """Run nodes until a signal, or (simulated) until the clock reaches ``until``; the bus's
+    transport is closed at the end."""
+    try:
+        return await _run(ctx, specs, until, after_start)
+    finally:
+        ctx.bus.transport.close()
+
+
+async def _run(
+    ctx: NodeContext,
+    specs: list[NodeSpec],
+    until: float | None,
+    after_start: Callable[[Launcher], Awaitable[Any]] | None,
+) -> Launcher:
     launcher = Launcher(ctx, specs)
     launcher.install_signal_handlers()
     await launcher.start()

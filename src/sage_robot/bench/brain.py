@@ -5,6 +5,15 @@ developing) and ``phrasings_heldout.yaml`` (never looked at while tuning), again
 seed's places in ``data/brain/places.yaml``. An utterance counts as right when both the
 intent and the place (for navigation and place questions) are right.
 
+Dialogues: multi-turn conversations (``data/brain/dialogues_dev.yaml`` and the held-out
+``dialogues_heldout.yaml``) scored turn by turn on the first tool call and its place, with
+the real sentence embedder for the semantic fallback (:mod:`sage_robot.bench.brain_dialogues`);
+``--no-semantic`` scores keywords and dialogue state alone.
+
+Tours: visitors' tour requests ("I have ten minutes, show me the labs") planned by the
+offline brain and the tour node on the default building's map, scored on a valid plan within
+the stated time, started on "yes" (:mod:`sage_robot.bench.brain_tours`).
+
 KB answers: the offline brain with the real knowledge base (SQLite, shipped corpus) on the
 KB's question set (``data/kb/questions.yaml``): how many reach the KB, how many it
 answers, and how many of those from the document the set names; and how many questions
@@ -31,6 +40,17 @@ PIECE_CHARS = 4  # characters per streamed piece (about one token)
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--turns", type=int, default=30, help="latency turns per case")
     p.add_argument("--token-delay-ms", type=float, default=5.0, help="pause between streamed pieces (ms)")
+    p.add_argument("--no-semantic", action="store_true", help="dialogues without the sentence embedder")
+
+
+def _embedder_source(off: bool) -> Any:
+    """all-MiniLM-L6-v2 from its installed package, loaded on first use (None: keywords only)."""
+    if off:
+        return None
+    from sage_robot.brain.semantic import cached_source
+    from sage_robot.kb.embed import MiniLmEmbedder
+
+    return cached_source(MiniLmEmbedder)
 
 
 def accuracy(which: str) -> dict[str, Any]:
@@ -174,6 +194,20 @@ async def _latency(turns: int, delay_s: float) -> dict[str, Any]:
     return out
 
 
+def _dialogues(args: argparse.Namespace) -> dict[str, Any]:
+    from sage_robot.bench.brain_dialogues import run_dialogues
+
+    t0 = time.perf_counter()
+    out = run_dialogues(_embedder_source(args.no_semantic))
+    return {"semantic": not args.no_semantic, **out, "seconds": round(time.perf_counter() - t0, 1)}
+
+
+def _tours() -> dict[str, Any]:
+    from sage_robot.bench.brain_tours import run_tours  # tours planned for visitors, scored
+
+    return run_tours()
+
+
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import math
 
@@ -183,6 +217,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "bench": "brain",
         "offline_dev": accuracy("dev"),
         "offline_heldout": accuracy("heldout"),
+        "offline_dialogues": _dialogues(args),
+        "tours": _tours(),
         "offline_kb_answers": asyncio.run(_kb_answers()),
         "llm_latency": {
             "turns": args.turns,

@@ -13,6 +13,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+ROUNDED_SHARE = 0.9  # short relations on the grid for the reference to count as rounded
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--log", help="CARMEN log (.clf, .log, .gz)")
@@ -22,6 +24,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="instead: map the shipped building by a scripted drive and compare with the truth",
     )
     p.add_argument("--sim-length", type=float, help="with --sim: stop the drive after this many metres")
+    p.add_argument("--map", help="with --sim: the map to drive through (default: the shipped building)")
+    p.add_argument(
+        "--route",
+        choices=("corridor", "auto"),
+        help="with --sim: corridor (shipped building only) or auto (a planned tour; default with --map)",
+    )
     p.add_argument("--relations", help="Kümmerle relations file for the log")
     p.add_argument("--limit", type=int, help="only the first N scans")
     p.add_argument(
@@ -54,7 +62,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.sim:
         from sage_robot.bench.slam_sim import run_check
 
-        return {"bench": "slam_sim", **run_check(args.sim_length, args.seed)}
+        return {"bench": "slam_sim", **run_check(args.sim_length, args.seed, args.map, args.route)}
     if not args.log:
         raise ConfigError("give --log LOG (with --relations REL or --self-reference), or --sim")
     if not args.relations and not args.self_reference:
@@ -111,17 +119,34 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _reference_check(stamps: Any, poses: Any, odo: Any, rels: list[Any]) -> dict[str, Any]:
-    """Short relations: how the reference relates to the odometry, and the rounding floor."""
+    """Short relations: how the reference relates to the odometry, the rounding floor and the
+    distance to each reference's rounding cell (:mod:`nav.slam.cells`); long (loop) relations,
+    which are not rounded, on their own."""
     import numpy as np
 
-    from sage_robot.core.geometry import relative
+    from sage_robot.nav.slam.cells import cell_score
     from sage_robot.nav.slam.refcheck import SHORT_GAP_SCANS, reference_quantization
-    from sage_robot.nav.slam.relations import match_stamps
+    from sage_robot.nav.slam.relations import (
+        error_parts,
+        reference_array,
+        relation_indices,
+        relative_poses,
+        summarize,
+    )
 
-    i = match_stamps(stamps, np.array([r.t1 for r in rels]))
-    j = match_stamps(stamps, np.array([r.t2 for r in rels]))
-    short = np.nonzero(np.abs(j - i) <= SHORT_GAP_SCANS)[0]
-    ref = np.array([(rels[k].dx, rels[k].dy, rels[k].dtheta) for k in short]).reshape(-1, 3)
-    o = np.array([relative(tuple(odo[i[k]]), tuple(odo[j[k]])) for k in short]).reshape(-1, 3)
-    e = np.array([relative(tuple(poses[i[k]]), tuple(poses[j[k]])) for k in short]).reshape(-1, 3)
-    return reference_quantization(ref, o, e).as_dict()
+    i, j = relation_indices(stamps, rels)
+    ref, est, o = reference_array(rels), relative_poses(poses, i, j), relative_poses(odo, i, j)
+    short = np.abs(j - i) <= SHORT_GAP_SCANS
+    out: dict[str, Any] = reference_quantization(ref[short], o[short], est[short]).as_dict()
+    out["short_rot_error_mean_deg"] = round(summarize(*error_parts(ref[short], est[short])).rot_mean_deg, 4)
+    far = summarize(*error_parts(ref[~short], est[~short]))
+    out.update(
+        long_relations=far.count,
+        long_trans_error_mean_m=round(far.trans_mean_m, 5),
+        long_trans_error_median_m=round(far.trans_median_m, 5),
+        long_rot_error_mean_deg=round(far.rot_mean_deg, 4),
+    )
+    if out["reference_on_grid"] >= ROUNDED_SHARE:
+        cells = cell_score(ref[short], o[short], est[short], poses[i[short], 2], stamps[i[short]])
+        out.update(cells.as_dict())
+    return out

@@ -1,157 +1,159 @@
-"""SLAM simulation check: map the default building by a scripted drive and compare with the truth.
+"""SLAM in simulation, on any map, against exact ground truth.
 
-The drive follows the corridors of the shipped building (``data/maps/campus``): east along
-the east-west corridor, back to the junction, north and then south along the north-south
-corridor, turning on the spot at the ends. Scans are ray-cast on the true map (360 beams,
-12 m, 1 cm noise) and the odometry drifts (2 % scale, ``YAW_DRIFT_RAD_PER_M``). The saved
-map is compared with the true one:
+``sage bench slam --sim [--map M.yaml] [--route corridor|auto] [--sim-length M]`` drives the
+simulated robot through a building map (default: the shipped one, ``data/maps/campus``) and
+maps it with :class:`sage_robot.nav.slam.engine.Slam`:
 
-- ``occupied_precision``: SLAM-occupied cells within ``MATCH_TOL_M`` of a true wall;
-- ``occupied_recall``: true wall cells the robot saw (next to a SLAM-known cell) that have a
-  SLAM-occupied cell within ``MATCH_TOL_M``;
-- the trajectory error (m) against the true poses;
-- navigation on the saved map: a path planned by ``nav.planner`` from the start to the end of
-  the drive on the saved map (read back with ``free_thresh 0.1``) keeps ``NAV_CLEARANCE_M``
-  from the true walls.
+- the drive: ``corridor`` (the shipped building only: east along the east-west corridor, back
+  to the junction, north and then south along the north-south corridor) or ``auto`` (any map:
+  a tour through well-spread free spots and back to the start, planned on the map;
+  :mod:`sage_robot.bench.slam_route`), one scan every ``STEP_M`` of travel (0.5 m/s, a scan
+  every 0.2 s) and ``TURN_STEP_RAD`` of turning on the spot;
+- the world (:mod:`sage_robot.bench.slam_world`): the map with clutter, walking people, the
+  robot's lidar model and drifting wheel odometry.
+
+Scores, against the true poses and the true map (with its clutter):
+
+- ``ate_rmse_m``: absolute trajectory error, RMSE of the position error of every scan (m),
+  in the map frame (the SLAM starts at the true first pose; no alignment);
+- ``return_error_m``: the position error at the end of the drive (back at the start for
+  ``auto``: the map keeps its shape when the robot returns);
+- map agreement (:mod:`sage_robot.nav.slam.mapscore`): mean distance from the mapped walls
+  to the true walls, and the fraction of the true walls the lidar hit that are mapped;
+- navigation on the map: a path planned by ``nav.planner`` on the SLAM map from the start to
+  the drive's farthest point keeps ``NAV_CLEARANCE_M`` from the true walls.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
-import tempfile
+import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-Pose = tuple[float, float, float]
+from sage_robot.bench.slam_route import (
+    COST_SCALING,
+    INFLATION_M,
+    ROBOT_INSCRIBED_M,
+    Pose,
+    auto_route,
+    corridor_route,
+    drive_poses,
+)
 
-STEP_M = 0.3  # travel between scans
-TURN_STEP_RAD = 0.4  # on-the-spot turning between scans
-BEAMS = 360
-RANGE_MAX_M = 12.0
-RANGE_NOISE_M = 0.01
-YAW_DRIFT_RAD_PER_M = 0.01
-MATCH_TOL_M = 0.1
+STEP_M = 0.1  # travel between scans (0.5 m/s, a scan every 0.2 s)
+TURN_STEP_RAD = 0.2  # on-the-spot turning between scans (1 rad/s)
+MIN_SEEN_HITS = 3  # a true wall cell counts as seen after this many lidar returns in it
 NAV_CLEARANCE_M = 0.15  # a planned path point this close to a true wall is a failure
-ROBOT_INSCRIBED_M, INFLATION_M, COST_SCALING = 0.25, 0.55, 3.0
+ROUTES = ("corridor", "auto")
+MAP_NORMAL_NEIGHBOURS = 32  # local-map normals for a lidar with 1 % range noise
+MAP_MIN_SUPPORT = 2  # keyframes that must agree on a local-map point
+SMALL_OBJECT_M = 0.25  # foreground objects this small (legs) are not matched
 
 
-def corridor_route() -> list[tuple[float, float]]:
-    """Waypoints (m) of the drive through the shipped building's corridors."""
-    from sage_robot.sim.building import CORRIDOR_END_M, EW_Y, NS_X, SIZE_M
+def shipped_map() -> Path:
+    from sage_robot.core.paths import package_data
 
-    ew, ns = sum(EW_Y) / 2, sum(NS_X) / 2
-    west, east = CORRIDOR_END_M + 4.0, SIZE_M[0] - CORRIDOR_END_M - 4.0
-    south, north = CORRIDOR_END_M + 4.0, SIZE_M[1] - CORRIDOR_END_M - 4.0
-    return [(west, ew), (east, ew), (ns, ew), (ns, north), (ns, south)]
+    return Path(package_data("maps", "campus", "map.yaml"))
 
 
-def drive_poses(route: list[tuple[float, float]], max_length_m: float | None = None) -> list[Pose]:
-    poses: list[Pose] = []
-    heading = math.atan2(route[1][1] - route[0][1], route[1][0] - route[0][0])
-    travelled = 0.0
-    for (x0, y0), (x1, y1) in itertools.pairwise(route):
-        target = math.atan2(y1 - y0, x1 - x0)
-        turn = math.remainder(target - heading, 2 * math.pi)
-        for k in range(1, int(abs(turn) / TURN_STEP_RAD) + 1):
-            poses.append((x0, y0, heading + math.copysign(k * TURN_STEP_RAD, turn)))
-        heading = target
-        length = math.hypot(x1 - x0, y1 - y0)
-        for k in range(int(length / STEP_M)):
-            if max_length_m is not None and travelled > max_length_m:
-                return poses
-            t = k * STEP_M / length
-            poses.append((x0 + t * (x1 - x0), y0 + t * (y1 - y0), heading))
-            travelled += STEP_M
+def plan_drive(grid: Any, route: str, max_length_m: float | None) -> list[Pose]:
+    """The true poses of the drive's scans."""
+    from sage_robot.core.errors import ConfigError
+
+    if route not in ROUTES:
+        raise ConfigError(f"--route {route!r}: use one of {', '.join(ROUTES)}")
+    waypoints = corridor_route() if route == "corridor" else auto_route(grid)
+    poses = drive_poses(waypoints, STEP_M, TURN_STEP_RAD, max_length_m)
+    if len(poses) < 2:
+        raise ConfigError("the drive is too short to map anything: give a longer --sim-length or another map")
     return poses
 
 
-def run_check(max_length_m: float | None = None, seed: int = 0) -> dict[str, Any]:
-    from sage_robot.core.geometry import compose, relative
-    from sage_robot.core.mapio import read_map, world_to_cell
-    from sage_robot.core.paths import package_data
+def slam_config(spec: Any) -> Any:
+    """SLAM settings for the simulated lidar: its reach and 1 % range noise (far points weigh
+    less, local-map normals fitted over ``MAP_NORMAL_NEIGHBOURS``), people's legs left out of
+    matching (``SMALL_OBJECT_M``), and local-map points kept only where two keyframes agree."""
+    from sage_robot.nav.slam.engine import SlamConfig
+    from sage_robot.nav.slam.matcher import MatchConfig
+
+    return SlamConfig(
+        max_range_m=spec.range_max_m,
+        map_normal_neighbours=MAP_NORMAL_NEIGHBOURS,
+        map_min_support=MAP_MIN_SUPPORT,
+        drop_small_objects_m=SMALL_OBJECT_M,
+        match=MatchConfig(range_noise_fraction=spec.noise_fraction),
+    )
+
+
+def run_check(
+    max_length_m: float | None = None,
+    seed: int = 0,
+    map_path: str | Path | None = None,
+    route: str | None = None,
+    people: bool = True,
+    clutter: bool = True,
+) -> dict[str, Any]:
+    """Drive, map and score; ``route`` defaults to ``corridor`` on the shipped map, else ``auto``."""
+    from sage_robot.bench.slam_world import SCAN_PERIOD_S, SimDrive
+    from sage_robot.core.errors import ConfigError
+    from sage_robot.core.mapio import read_map
     from sage_robot.nav.slam.engine import Slam
+    from sage_robot.nav.slam.mapscore import score_map
     from sage_robot.nav.slam.points import Scan
-    from sage_robot.nav.slam.store import save_session
-    from sage_robot.sim.raycast import GridRaycaster
+    from sage_robot.nav.slam.store import build_map
 
-    rng = np.random.default_rng(seed)
-    truth_grid = read_map(package_data("maps", "campus", "map.yaml"))
-    caster = GridRaycaster(truth_grid)
-    truth = drive_poses(corridor_route(), max_length_m)
-    angles = -math.pi + 2 * math.pi * np.arange(BEAMS) / BEAMS
-    slam = Slam(initial_pose=truth[0])
-    odom: Pose = truth[0]
-    import time
-
-    t0 = time.perf_counter()
-    for k, pose in enumerate(truth):
-        if k:
-            dx, dy, dth = relative(truth[k - 1], pose)
-            dist = math.hypot(dx, dy)
-            step = (
-                dx * (1 + rng.normal(0, 0.02)),
-                dy + rng.normal(0, 0.005),
-                dth * 1.02 + YAW_DRIFT_RAD_PER_M * dist + rng.normal(0, 0.003),
-            )
-            odom = compose(odom, step)
-        ranges = caster.cast(pose[0], pose[1], angles + pose[2], RANGE_MAX_M) + rng.normal(
-            0, RANGE_NOISE_M, BEAMS
-        )
-        slam.add_scan(k * 0.1, odom, Scan(ranges.astype(np.float32), angles, 0.1, RANGE_MAX_M))
-    seconds = time.perf_counter() - t0
+    path = Path(map_path) if map_path is not None else shipped_map()
+    if not path.is_file():
+        raise ConfigError(f"--map {path}: no such map file")
+    route = route or ("corridor" if map_path is None else "auto")
+    if route == "corridor" and path.resolve() != shipped_map().resolve():
+        raise ConfigError("--route corridor drives the shipped building's corridors: use --route auto with --map")
+    truth_grid = read_map(path)
+    truth = plan_drive(truth_grid, route, max_length_m)
+    world = SimDrive(truth_grid, truth, seed, people=people, clutter=clutter)
+    sp = world.spec
+    angles = sp.angles()
+    slam = Slam(slam_config(sp), initial_pose=truth[0])
+    t0 = time.process_time()
+    for k in range(len(truth)):
+        odom = world.odometry(k)
+        ranges = world.ranges(k)
+        slam.add_scan(k * SCAN_PERIOD_S, odom, Scan(ranges, angles, sp.range_min_m, sp.range_max_m, world.laser))
+    cpu_s = time.process_time() - t0
     _, est = slam.trajectory_array()
-    err = np.hypot(est[:, 0] - np.array(truth)[:, 0], est[:, 1] - np.array(truth)[:, 1])
-    odom_end = math.hypot(odom[0] - truth[-1][0], odom[1] - truth[-1][1])
-
-    with tempfile.TemporaryDirectory() as tmp:
-        paths = save_session(slam, tmp, "sim_check")
-        saved = read_map(paths["yaml"])
-    occupied = saved.data == 100
-    rows, cols = np.nonzero(occupied)
-    xs = saved.origin.x + (cols + 0.5) * saved.resolution
-    ys = saved.origin.y + (rows + 0.5) * saved.resolution
-    precision = float((caster.clearance(xs, ys) <= MATCH_TOL_M).mean()) if len(xs) else 0.0
-    recall = _recall(truth_grid, saved, world_to_cell)
-    nav = _navigate(saved, caster, truth[0], truth[-1])
+    true_xy = np.asarray(truth)[:, :2]
+    err = np.hypot(*(est[:, :2] - true_xy).T)
+    moved = np.hypot(*np.diff(true_xy, axis=0).T)
+    mapped = build_map(slam)
+    score = score_map(world.grid, mapped, world.seen >= MIN_SEEN_HITS)
+    far = truth[int(np.argmax(np.hypot(*(true_xy - true_xy[0]).T)))]
     return {
+        "map": str(path),
+        "route": route,
         "scans": len(truth),
-        "distance_m": round(STEP_M * sum(1 for a, b in itertools.pairwise(truth) if a[:2] != b[:2]), 1),
+        "distance_m": round(float(moved.sum()), 1),
+        "duration_s": round(len(truth) * SCAN_PERIOD_S, 1),
+        "people": len(world.crowd.people),
+        "clutter": world.clutter,
         "keyframes": len(slam.keyframes),
         "loop_closures": slam.loop_closures,
-        "processing_s": round(seconds, 2),
+        "cpu_s": round(cpu_s, 2),
+        "ate_rmse_m": round(float(np.sqrt((err**2).mean())), 4),
         "trajectory_error_mean_m": round(float(err.mean()), 4),
         "trajectory_error_max_m": round(float(err.max()), 4),
-        "odometry_end_error_m": round(odom_end, 3),
-        "occupied_precision": round(precision, 4),
-        "occupied_recall": round(recall, 4),
-        **nav,
+        "return_error_m": round(float(err[-1]), 4),
+        "odometry_end_error_m": round(math.hypot(world.odom[0] - truth[-1][0], world.odom[1] - truth[-1][1]), 3),
+        **score.as_dict(),
+        "occupied_recall": round(score.walls_found, 4),
+        **_navigate(mapped, world.caster, truth[0], far),
     }
 
 
-def _recall(truth: Any, saved: Any, world_to_cell: Any) -> float:
-    """Of the true wall cells next to space the SLAM map knows, those it marks as a wall."""
-    from scipy.ndimage import binary_dilation, distance_transform_edt
-
-    wall = truth.data >= 65
-    rows, cols = np.nonzero(wall)
-    xs = truth.origin.x + (cols + 0.5) * truth.resolution
-    ys = truth.origin.y + (rows + 0.5) * truth.resolution
-    r, c = world_to_cell(saved, xs, ys)
-    inside = (r >= 0) & (r < saved.height) & (c >= 0) & (c < saved.width)
-    free = saved.data == 0
-    near_free = binary_dilation(free, iterations=2)
-    seen = np.zeros(len(xs), dtype=bool)
-    seen[inside] = near_free[r[inside], c[inside]]
-    if not seen.any():
-        return 0.0
-    dist = distance_transform_edt(saved.data != 100) * saved.resolution
-    return float((dist[r[seen], c[seen]] <= MATCH_TOL_M).mean())
-
-
 def _navigate(saved: Any, caster: Any, start: Pose, goal: Pose) -> dict[str, Any]:
-    """Plan on the saved map; check the path against the true walls."""
+    """Plan on the SLAM map; check the path against the true walls."""
     try:
         from sage_robot.nav.costmap import Costmap
         from sage_robot.nav.planner import NoPath, plan

@@ -9,6 +9,9 @@
   phrase, and in the babble of other talkers) and "alexa",
   and false accepts over minutes of other speech and noise.
 - CPU per 80 ms frame (wake models + VAD).
+- The wake heads' margin: their threshold minus their best score on every negative while
+  the gate was open (kept >= 0.3; ``--seed N`` varies Piper's prosody and the noise,
+  ``--wake-only`` runs this part alone).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from sage_robot.bench.voice_wake import (
     babble_talkers,
     false_accepts,
     false_rejects,
+    head_margin,
     non_wake_audio,
     real_speech_in_noise,
     wake_sources,
@@ -50,6 +54,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="long-question turns, partial transcripts on/off in turn (0: skip)")
     p.add_argument("--fa-minutes", type=float, default=10.0, help="minutes of non-wake audio")
     p.add_argument("--quick", action="store_true", help="small sizes (a smoke test)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seeds Piper's prosody noise and the noise of the wake sets (0: the original)")
+    p.add_argument("--wake-only", action="store_true", help="only the wake-word part (no STT, TTS, turns)")
 
 
 def _stt(stt: Any, speech: Any) -> dict[str, Any]:
@@ -218,16 +225,24 @@ async def _partial_ab(models: Any, settings: Any, speech: Any, turns: int) -> di
 def run(args: argparse.Namespace) -> dict[str, Any]:
     import os
 
+    import onnxruntime
+
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     from sage_robot.core.config.areas import VoiceSettings
     from sage_robot.voice.node import VoiceModels
-    from sage_robot.voice.wake import OpenWakeWordEngine
+    from sage_robot.voice.tts import Speech, make_engine
 
+    if args.seed:
+        onnxruntime.set_seed(args.seed)  # before Piper's session: its prosody noise is seeded
     settings = VoiceSettings(tts_deterministic=False)
+    out: dict[str, Any] = {"bench": "voice", "seed": args.seed, "cpus": os.cpu_count(),
+                           "load_avg_1min": round(os.getloadavg()[0], 1)}  # fmt: skip
+    if args.wake_only:
+        out.update(_wake(Speech(make_engine("piper", settings.tts_voice)), settings, args))
+        return out
     t0 = time.perf_counter()
     models = VoiceModels.load(settings)
-    out: dict[str, Any] = {"bench": "voice", "load_s": round(time.perf_counter() - t0, 2),
-                           "cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 1)}
+    out["load_s"] = round(time.perf_counter() - t0, 2)
     out.update(_frame_cpu(models, settings))
     out.update(_stt(models.stt, models.speech))
     out.update(_tts(models.speech))
@@ -235,10 +250,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out["asr_partial"] = settings.asr_partial
     out.update(_partial_contention(models, 2 if args.quick else PARTIAL_ROUNDS))
     out.update(asyncio.run(_partial_ab(models, settings, models.speech, 2 if args.quick else args.ab_turns)))
+    out.update(_wake(models.speech, settings, args))
+    return out
+
+
+def _wake(speech: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any]:
+    """False rejects, false accepts and the heads' margin (see module doc)."""
+    from sage_robot.voice.wake import OpenWakeWordEngine
+
     # The profile's hey_jarvis and the opt-in alexa, scored together (models are independent).
     both = settings.model_copy(update={"wake_models": WAKE_MODELS})
     engine = OpenWakeWordEngine(WAKE_MODELS)
-    out["wake_models"] = list(settings.wake_models)
+    out: dict[str, Any] = {"wake_models": list(settings.wake_models)}
     out["wake_thresholds"] = {n: both.wake_model_thresholds.get(n, both.wake_threshold)
                               for n in WAKE_MODELS}  # fmt: skip
     out["wake_patience"] = {n: both.wake_model_patience.get(n, both.wake_patience_frames)
@@ -249,17 +272,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out["wake_denoise_thresholds"] = dict(settings.wake_denoise_thresholds)
     out["wake_heads"] = dict(settings.wake_heads)
     out["wake_head_threshold"], out["wake_head_gate"] = settings.wake_head_threshold, settings.wake_head_gate
-    jarvis = wake_sources(models.speech, WAKE_PHRASES, args.quick)
+    jarvis = wake_sources(speech, WAKE_PHRASES, args.quick)
     out.update(false_rejects(engine, white_clips(jarvis), both))
     no_head = both.model_copy(update={"wake_heads": {}})  # A/B: the same clips without the heads
     out.update(false_rejects(engine, white_clips(jarvis), no_head, prefix="wake_no_head"))
     out.update(false_rejects(engine, white_clips(jarvis, WAKE_LEAD_S), both, prefix="wake_lead"))
-    talkers = babble_talkers(models.speech)
+    talkers = babble_talkers(speech)
     out.update(false_rejects(engine, babble_clips(jarvis, talkers), both, prefix="wake_babble"))
-    alexa = wake_sources(models.speech, ALEXA_PHRASES, args.quick)
+    alexa = wake_sources(speech, ALEXA_PHRASES, args.quick)
     out.update(false_rejects(engine, white_clips(alexa), both, "alexa", prefix="alexa"))
     minutes = 0.5 if args.quick else args.fa_minutes
-    out.update(false_accepts(engine, non_wake_audio(models.speech, minutes), both,
+    out.update(false_accepts(engine, non_wake_audio(speech, minutes, args.seed), both,
                               settings.wake_models))  # fmt: skip
-    out.update(real_speech_in_noise(engine, settings))
+    out.update(real_speech_in_noise(engine, settings, args.seed))
+    out.update(head_margin(out, settings.wake_head_threshold))
     return out

@@ -139,12 +139,17 @@ def false_rejects(engine: Any, clips: list[tuple[str, np.ndarray]], vs: Any, mod
             f"{prefix}_missed": missed[:10]}  # fmt: skip
 
 
-def non_wake_audio(speech: Any, minutes: float) -> np.ndarray:
+def seeded(base: int, seed: int) -> np.random.Generator:
+    """The bench's stream ``base``; ``seed`` 0 keeps the original stream, others vary it."""
+    return np.random.default_rng(base if seed == 0 else [base, seed])
+
+
+def non_wake_audio(speech: Any, minutes: float, seed: int = 0) -> np.ndarray:
     """Other speech (Piper, espeak-ng voices, real recordings) and noise, ``minutes`` long."""
     from sage_robot.voice.audio_io import load_audio, resample
     from sage_robot.voice.tts import EspeakEngine
 
-    rng = np.random.default_rng(5)
+    rng = seeded(5, seed)
     want = int(minutes * 60 * SAMPLE_RATE_HZ)
     parts: list[np.ndarray] = [load_audio(p) for p in sorted(POCKETSPHINX.glob("librivox/*.wav"))]
     piper = speech.engine
@@ -196,7 +201,7 @@ def false_accepts(engine: Any, audio: np.ndarray, vs: Any, profile_models: Any) 
 REAL_NOISE_SNRS_DB = (10.0, 5.0)  # real recordings again, in white noise at these ratios
 
 
-def real_speech_in_noise(engine: Any, vs: Any) -> dict[str, Any]:
+def real_speech_in_noise(engine: Any, vs: Any, seed: int = 0) -> dict[str, Any]:
     """Detections by the profile's models on every real recording of ``POCKETSPHINX`` in
     white noise (the heads learned from synthetic voices only: this is where they could go
     wrong), and the heads' best smoothed scores, with and without the gate open."""
@@ -208,7 +213,7 @@ def real_speech_in_noise(engine: Any, vs: Any) -> dict[str, Any]:
         return {"real_noisy_audio_s": 0.0, "real_noisy_note": f"no recordings in {POCKETSPHINX}"}
     gap = np.zeros(SAMPLE_RATE_HZ // 2, dtype=np.int16)
     speech = np.concatenate([x for f in files for x in (load_audio(f), gap)]).astype(np.float64)
-    rng = np.random.default_rng(13)
+    rng = seeded(13, seed)
     found, head_max, gated_max = 0, 0.0, 0.0
     for snr in REAL_NOISE_SNRS_DB:
         x = speech + rng.normal(0.0, float(np.sqrt(np.mean(speech**2))) / 10 ** (snr / 20), len(speech))
@@ -221,3 +226,19 @@ def real_speech_in_noise(engine: Any, vs: Any) -> dict[str, Any]:
     return {"real_noisy_audio_s": round(len(speech) * len(REAL_NOISE_SNRS_DB) / SAMPLE_RATE_HZ, 1),
             "real_noisy_false_accepts": found, "real_noisy_head_max": round(head_max, 3),
             "real_noisy_head_max_gated": round(gated_max, 3)}  # fmt: skip
+
+
+HEAD_MARGIN_MIN = 0.3  # the heads' best gated score on negatives stays this far under threshold
+
+
+def head_margin(out: dict[str, Any], head_threshold: float) -> dict[str, Any]:
+    """The heads' margin: their threshold minus their best smoothed score on any negative
+    (the minutes of other speech and noise, real speech in noise) while the gate was open."""
+    gated = [*out.get("fa_max_head_gated", {}).values()]
+    if "real_noisy_head_max_gated" in out:
+        gated.append(out["real_noisy_head_max_gated"])
+    if not gated:
+        return {}
+    margin = head_threshold - max(gated)
+    return {"wake_head_negatives_max_gated": round(max(gated), 3), "wake_head_margin": round(margin, 3),
+            "wake_head_margin_ok": margin >= HEAD_MARGIN_MIN}  # fmt: skip

@@ -27,6 +27,7 @@ import snowballstemmer
 
 from sage_robot.brain.matching import STOP_WORDS
 from sage_robot.brain.speech import split_sentences
+from sage_robot.core.places import Place, Places
 
 SIM_SURE = 0.40  # cosine similarity at which a passage is on topic by itself
 SIM_MIN = 0.20  # cosine similarity a passage needs with half the keywords found
@@ -132,6 +133,15 @@ def kb_answer(question: str, hits: Iterable[Hit | str]) -> str | None:
     """Two or three speakable sentences from the best relevant passage, or None."""
     found = best_hit(question, (h if isinstance(h, Hit) else Hit(h) for h in hits))
     return trim(found.text, question) if found else None
+
+
+_PLACE_IN_TITLE = re.compile(r"\(([A-Z0-9_]+)\)")  # "Valpo Robotics (VALPO_ROBOTICS)"
+
+
+def place_of(hit: Hit, places: Places) -> Place | None:
+    """The place whose own document ``hit`` comes from (its title names it), else None."""
+    m = _PLACE_IN_TITLE.search(hit.title)
+    return places.get(m.group(1)) if m and m.group(1) in places else None
 
 
 def names_place(hit: Hit, names: Iterable[str]) -> bool:

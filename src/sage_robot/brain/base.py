@@ -10,6 +10,16 @@ from typing import Any
 from sage_robot.brain.tools import ToolCall
 
 Say = Callable[[str], None]  # called with each sentence to speak, in order
+DEFAULT_SESSION = "robot"  # the robot's own conversation: its microphone, /talk, typed goals
+
+
+@dataclass(frozen=True)
+class Utterance:
+    """A ``converse`` goal that names its conversation (``Text`` goals are the robot's own):
+    each session keeps its own dialogue state."""
+
+    text: str
+    session: str = DEFAULT_SESSION
 
 
 @dataclass
@@ -60,13 +70,14 @@ class Brain(ABC):
     kind = "brain"
 
     @abstractmethod
-    async def respond(self, text: str, say: Say | None = None) -> TurnResult:
-        """Answer one visitor utterance, calling ``say`` with each sentence as it is ready."""
+    async def respond(self, text: str, say: Say | None = None, session: str = DEFAULT_SESSION) -> TurnResult:
+        """Answer one visitor utterance of conversation ``session``, calling ``say`` with
+        each sentence as it is ready."""
 
     @abstractmethod
     async def react(self, prompt: str, fallback: str, say: Say | None = None) -> TurnResult:
         """A turn the robot starts itself (an arrival): ``prompt`` for a model, else ``fallback``."""
 
     @abstractmethod
-    def reset(self) -> None:
-        """Forget the conversation."""
+    def reset(self, session: str | None = None) -> None:
+        """Forget one conversation, or every one."""

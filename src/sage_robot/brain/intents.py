@@ -12,7 +12,16 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from sage_robot.brain.matching import PlaceMatch, exact_match, fuzzy_match, match_place
+from sage_robot.brain import tour_intents
+from sage_robot.brain.matching import (
+    SYNONYMS,
+    PlaceMatch,
+    category_places,
+    exact_match,
+    fuzzy_match,
+    keyword_match,
+    match_place,
+)
 from sage_robot.core.places import Place, Places
 
 INTENTS = (
@@ -28,8 +37,12 @@ INTENTS = (
     "battery",
     "ip_address",
     "tour",
+    "tour_control",  # pause, resume, skip or stop the running tour (slot: the command)
     "list_places",
     "describe_place",
+    "distance",  # how far a place is
+    "suggest",  # a place guessed from what the visitor said, offered back (semantic fallback)
+    "clarify",  # a question back: where to, or which of several places
     "question",
     "unknown",
 )
@@ -83,6 +96,7 @@ class Intent:
     place: Place | None = None
     slot: str = ""  # the words that named the place (or the tour theme, the question)
     how: str = ""  # how the place was matched
+    choices: tuple[Place, ...] = ()  # places that fit the words equally well, the first included
 
     @property
     def place_name(self) -> str:
@@ -146,6 +160,22 @@ WHERE_IS = re.compile(
 DESCRIBE = re.compile(
     r"^(tell me about|tell me more about|what is|what are|describe|what happens (in|at)|"
     r"what do (they|you|people) do (in|at)|what goes on (in|at)|what is in|what can i do (in|at))\b"
+)
+# The visitor asks to be taken along: a "where is" with this is a request to go.
+CONSENT = _any(
+    r"\b(take|bring|lead|walk|guide|escort) (me|us)\b",
+    r"\blead the way\b",
+    r"\b(let us|lets) go\b",
+)
+DISTANCE = _any(r"\bhow far\b", r"\bis (it|that|the \w+( \w+)?) far\b", r"\bhow long to (get|walk)\b")
+# A question that asks where something can be had or done: answered from the map when a
+# place fits ("is there somewhere I can get a coffee?"), else from the knowledge base.
+LOCATE = _any(
+    r"\bwhere (can|could|do|would|should|might) (i|we|you|one) (get|buy|grab|find|see|eat|go|study|"
+    r"wash|charge|work|print|build|sit)\b",
+    r"\b(is|are) there (a |an |any |some )?(\w+ )?(place|places|somewhere|anywhere|spot)\b",
+    r"\bsomewhere (i|we) (can|could)\b",
+    r"\bwhere (do|does) (students|people|they)\b",
 )
 CAPABILITIES = _any(
     r"^help\b",
@@ -216,7 +246,22 @@ def _place(slot: str, whole: str, places: Places, strict: bool = False) -> Place
     """The place in the slot, else anywhere in the sentence; ``strict``: names only."""
     if strict:
         return exact_match(slot, places) or fuzzy_match(slot, places)
-    return match_place(slot, places) or (exact_match(whole, places) if whole != slot else None)
+    found = match_place(slot, places) or (exact_match(whole, places) if whole != slot else None)
+    if found is None and (not slot or REFERENCE.match(slot)):  # "..., take me there": the rest says where
+        found = keyword_match(whole, places)
+    return found
+
+
+# "there", "it": a place named before (resolved by the dialogue state, brain/dialogue.py).
+REFERENCE = re.compile(
+    r"^(there|it|that|that place|that one|this place|this one|them|here)?"
+    r"( again| then| instead| now| please| too| as well| around here)*$"
+)
+
+
+def _with_choices(name: str, hit: PlaceMatch, slot: str) -> Intent:
+    choices = (hit.place, *hit.tied) if hit.tied else ()
+    return Intent(name, hit.place, slot, hit.how, choices)
 
 
 # ---------------------------------------------------------------- the rules, in order
@@ -247,18 +292,47 @@ def _tour(t: str, places: Places) -> Intent | None:
     return Intent("tour", slot=_tour_theme(t))
 
 
+def _tour_control(t: str, places: Places) -> Intent | None:
+    return Intent("tour_control", slot=tour_intents.control_command(t))
+
+
+def _tour_plan(t: str, places: Places) -> Intent | None:
+    """A tour planned for the visitor's time or interests (said back, started on a "yes")."""
+    slot = tour_intents.plan_slot(t, places)
+    return None if slot is None else Intent("tour", slot=slot, how="plan")
+
+
 def _where_is(t: str, places: Places) -> Intent | None:
     slot = _slot_after(WHERE_IS, t)
     hit = _place(re.sub(r"\b(located|at|from here)$", "", slot).strip(), t, places)
-    if hit:
-        return Intent("where_is", hit.place, slot, hit.how)
+    if hit:  # "where is the bathroom, can you take me": consent is given, no need to ask
+        return _with_choices("navigate" if CONSENT.search(t) else "where_is", hit, slot)
     return Intent("question", slot=t)
+
+
+def _distance(t: str, places: Places) -> Intent | None:
+    """'How far is the café?'; 'how far is it?' is left for the dialogue state to fill."""
+    hit = exact_match(t, places) or fuzzy_match(_slot_after(DISTANCE, t), places)
+    return Intent("distance", hit.place if hit else None, t, hit.how if hit else "")
+
+
+def _locate(t: str, places: Places) -> Intent | None:
+    """A where-can-I question the map answers: a place named, or an everyday need a place
+    is for ("somewhere I can get a coffee"); else the rules after it (the KB knows more
+    about which lab has robot arms than the places' descriptions do)."""
+    needs = any(w in SYNONYMS for w in t.split())
+    hit = exact_match(t, places) or (keyword_match(t, places) if needs else None)
+    if hit is None:
+        return None
+    return _with_choices("navigate" if CONSENT.search(t) else "where_is", hit, t)
 
 
 def _navigate(t: str, places: Places) -> Intent | None:
     slot = _slot_after(NAVIGATE, t)
     hit = _place(slot, t, places)
-    return Intent("navigate", hit.place if hit else None, slot, hit.how if hit else "")
+    if hit:
+        return _with_choices("navigate", hit, slot)
+    return Intent("navigate", None, slot, choices=category_places(slot, places))  # "the labs": which?
 
 
 def _describe(t: str, places: Places) -> Intent | None:
@@ -273,12 +347,15 @@ def _question(t: str, places: Places) -> Intent | None:
 
 
 RULES: tuple[tuple[re.Pattern[str], Rule], ...] = (
+    (tour_intents.TOUR_CONTROLS, _tour_control),
     (STATUS, _status),
     (CANCEL, _named("cancel")),
     (IP, _named("ip_address")),
     (WHERE_AM_I, _named("where_am_i")),
     (LIST_PLACES, _named("list_places")),
+    (tour_intents.TOUR_PLAN, _tour_plan),
     (TOUR, _tour),
+    (DISTANCE, _distance),
     (WHERE_IS, _where_is),
     (NAVIGATE, _navigate),
     (BATTERY, _named("battery")),
@@ -286,6 +363,7 @@ RULES: tuple[tuple[re.Pattern[str], Rule], ...] = (
     (CAPABILITIES, _named("capabilities")),
     (SMALL_TALK, _named("small_talk")),
     (GOODBYE, _named("goodbye")),
+    (LOCATE, _locate),
     (QUESTION, _question),
     (QUESTION_INSIDE, _question),
 )

@@ -22,7 +22,7 @@ import logging
 from collections.abc import Callable
 from typing import Any
 
-from sage_robot.brain.base import Brain, Say, Speaker, TurnResult
+from sage_robot.brain.base import DEFAULT_SESSION, Brain, Say, Speaker, TurnResult
 from sage_robot.brain.offline import OfflineBrain
 from sage_robot.brain.prompt import system_prompt
 from sage_robot.brain.speech import SentenceSplitter
@@ -35,6 +35,7 @@ NO_KEY = "not-needed"  # Ollama, llama.cpp and vLLM accept any key; the client w
 ENDPOINT_DOWN = "My online brain is not answering right now, so I will keep it simple."
 LOST_CONNECTION = "Sorry, I lost my connection for a moment."
 TANGLED = "Sorry, I got a bit tangled up there. Could you ask me again?"
+MAX_CONVERSATIONS = 32  # sessions whose history is kept at once; the one idle longest goes first
 
 _log = logging.getLogger("sage.brain.llm")
 
@@ -78,16 +79,29 @@ class LlmBrain(Brain):
         self.settings, self.llm = settings, settings.llm
         self.tools, self.robot, self.clock = tools, tools.ctx.robot, clock
         self.client = client if client is not None else make_client(settings)
-        self.offline = OfflineBrain(tools, settings.robot.name)
-        self.history: list[list[Message]] = []  # one message list per turn
+        self.offline = OfflineBrain(tools, settings.robot.name, clock)
+        self._histories: dict[str, list[list[Message]]] = {}  # per session, most recent last
+        self._session = DEFAULT_SESSION
+        self.history: list[list[Message]] = self._history_of(DEFAULT_SESSION)  # one list per turn
         self._offline_until = -1e18
         self._today = today
 
-    def reset(self) -> None:
-        self.history.clear()
-        self.offline.reset()
+    def reset(self, session: str | None = None) -> None:
+        for name, history in self._histories.items():
+            if session is None or name == session:
+                history.clear()
+        self.offline.reset(session)
 
-    async def respond(self, text: str, say: Say | None = None) -> TurnResult:
+    def _history_of(self, session: str) -> list[list[Message]]:
+        """The session's history (made when new), bounded to :data:`MAX_CONVERSATIONS`."""
+        history = self._histories.pop(session, [])
+        self._histories[session] = history
+        while len(self._histories) > MAX_CONVERSATIONS:
+            del self._histories[next(iter(self._histories))]
+        return history
+
+    async def respond(self, text: str, say: Say | None = None, session: str = DEFAULT_SESSION) -> TurnResult:
+        self._session, self.history = session, self._history_of(session)
         return await self._turn({"role": "user", "content": text}, text, None, say)
 
     async def react(self, prompt: str, fallback: str, say: Say | None = None) -> TurnResult:
@@ -126,7 +140,7 @@ class LlmBrain(Brain):
         else:
             if announce and say is not None:
                 say(ENDPOINT_DOWN)
-            result = await self.offline.respond(text, say)
+            result = await self.offline.respond(text, say, self._session)
             if announce:
                 result.sentences.insert(0, ENDPOINT_DOWN)
                 result.reply = " ".join(result.sentences)

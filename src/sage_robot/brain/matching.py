@@ -27,6 +27,9 @@ PARTIAL_WEIGHT = 0.95  # a name found inside longer text ranks just below a whol
 KEYWORD_MIN = 1.0  # summed rarity weight of matched words a description match needs
 EXACT_SCORE = 100.0
 STEM_MIN_CHARS = 4  # a stem keeps at least this many letters ("labs" → "lab" is the exception)
+# Words naming a kind of place rather than one place ("take me to the labs": which one?).
+CATEGORY_WORDS = frozenset({"lab", "laboratory", "workshop", "shop", "space", "center", "studio"})
+FUZZY_TIE = 2.0  # places whose fuzzy score is this close to the best are equally likely ("ece lab")
 
 # Homophones speech-to-text writes for the numbers in lab names ("ece lab too").
 _STT_NUMBERS = [
@@ -69,6 +72,7 @@ class PlaceMatch:
     place: Place
     score: float  # 0..100 for name matches; keyword matches report their weight * 10
     how: str  # "exact", "fuzzy" or "keyword"
+    tied: tuple[Place, ...] = ()  # other places that fit as well: the visitor must choose
 
 
 def clean(text: str) -> str:
@@ -108,25 +112,31 @@ def exact_match(text: str, places: Places) -> PlaceMatch | None:
 
 
 def fuzzy_match(text: str, places: Places, minimum: float = FUZZY_MIN) -> PlaceMatch | None:
-    """The name or alias closest to ``text`` (whole, or found inside it)."""
+    """The name or alias closest to ``text`` (whole, or found inside it); places that fit
+    just as well ("ece lab": lab 1 and lab 2) are listed in ``tied``."""
     wanted = clean(text)
     if not wanted:
         return None
-    best: PlaceMatch | None = None
+    best: dict[str, tuple[float, Place]] = {}
     for spoken, place in _spoken(places):
         score = fuzz.ratio(wanted, spoken)
         if len(spoken) >= PARTIAL_MIN_CHARS and len(wanted) > len(spoken):
             score = max(score, PARTIAL_WEIGHT * fuzz.partial_ratio(spoken, wanted))
-        if score >= minimum and (best is None or score > best.score):
-            best = PlaceMatch(place, float(score), "fuzzy")
-    return best
+        if score >= minimum and score > best.get(place.name, (-1.0, place))[0]:
+            best[place.name] = (float(score), place)
+    if not best:
+        return None
+    ranked = sorted(best.values(), key=lambda b: -b[0])  # stable: the file's order among equals
+    top, place = ranked[0]
+    tied = tuple(p for s, p in ranked[1:] if s >= top - FUZZY_TIE)
+    return PlaceMatch(place, top, "fuzzy", tied)
 
 
-def keyword_match(text: str, places: Places) -> PlaceMatch | None:
-    """Content words against each place's name, aliases and description, rarer words weighing more."""
+def _keyword_scores(text: str, places: Places) -> list[tuple[float, Place]]:
+    """(summed rarity weight of the matched words, place), best first."""
     wanted = set(content_words(text))
     if not wanted or not len(places):
-        return None
+        return []
     docs = {p.name: set(content_words(" ".join([p.name, *p.aliases, p.description]))) for p in places}
     n = len(docs)
     weight = {w: math.log((n + 1) / (1 + sum(w in d for d in docs.values()))) + 0.1 for w in wanted}
@@ -135,14 +145,33 @@ def keyword_match(text: str, places: Places) -> PlaceMatch | None:
         hits = wanted & docs[p.name]
         if hits:
             scored.append((sum(weight[w] for w in hits), p))
+    scored.sort(key=lambda s: s[0], reverse=True)  # stable: the file's order among equals
+    return scored
+
+
+def keyword_match(text: str, places: Places) -> PlaceMatch | None:
+    """Content words against each place's name, aliases and description, rarer words weighing
+    more; None when nothing fits or several places fit as well (see :func:`category_places`)."""
+    scored = _keyword_scores(text, places)
     if not scored:
         return None
-    scored.sort(key=lambda s: s[0], reverse=True)
     top, place = scored[0]
     tie = len(scored) > 1 and scored[1][0] >= top - 1e-9
     if top < KEYWORD_MIN or tie:
         return None
     return PlaceMatch(place, round(10 * top, 1), "keyword")
+
+
+def category_places(text: str, places: Places) -> tuple[Place, ...]:
+    """The places of a kind ``text`` names and nothing else ("the labs", "a workshop"),
+    when there are several: the visitor must choose."""
+    words = content_words(text)
+    if not words or not all(w in CATEGORY_WORDS for w in words):
+        return ()
+    scored = _keyword_scores(text, places)
+    if len(scored) < 2 or scored[1][0] < scored[0][0] - 1e-9:
+        return ()
+    return tuple(p for s, p in scored if s >= scored[0][0] - 1e-9)
 
 
 def match_place(text: str, places: Places) -> PlaceMatch | None:

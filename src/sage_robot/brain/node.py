@@ -8,7 +8,11 @@
   ``battery_critical`` → tells the visitor it must return to its dock. Each sentence is
   published as ``Text`` on :data:`topics.SAY`; a navigation goal the brain started that
   fails is announced the same way.
-- The conversation is forgotten after ``llm.idle_reset_s`` without a turn.
+- The conversation is forgotten after ``llm.idle_reset_s`` without a turn. A goal may be
+  an :class:`~sage_robot.brain.base.Utterance` naming its session: each session keeps its
+  own dialogue state (``Text`` goals are the robot's own session).
+- The semantic fallback uses the sentence embedder in ``ctx.resources[SENTENCE_EMBEDDER]``
+  when one is there (looked up at each turn that needs it), else keywords only.
 """
 
 from __future__ import annotations
@@ -16,14 +20,17 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from sage_robot.brain.base import Brain, TurnResult
+from sage_robot.brain.base import DEFAULT_SESSION, Brain, TurnResult, Utterance
+from sage_robot.brain.offline import OfflineBrain
 from sage_robot.brain.phrases import EVENT_LINES, UNKNOWN, place_phrase, upper_first, welcome
 from sage_robot.brain.robot import RobotLink
+from sage_robot.brain.semantic import EmbedderSource
 from sage_robot.brain.tools import ToolContext, ToolRegistry
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalContext
 from sage_robot.core.clock import Clock
 from sage_robot.core.config import Settings
+from sage_robot.core.embedding import SENTENCE_EMBEDDER
 from sage_robot.core.msgs import Event, Text
 from sage_robot.core.node import Node
 from sage_robot.core.paths import waypoints_yaml
@@ -31,16 +38,20 @@ from sage_robot.core.paths import waypoints_yaml
 EVENT_TURN_TIMEOUT_S = 20.0  # longest an arrival welcome may take before it is dropped
 
 
-def make_brain(settings: Settings, robot: RobotLink, clock: Clock) -> Brain:
-    """The configured brain: the LLM agent when ``llm.base_url`` is set, else offline."""
+def make_brain(
+    settings: Settings, robot: RobotLink, clock: Clock, embedder: EmbedderSource | None = None
+) -> Brain:
+    """The configured brain: the LLM agent when ``llm.base_url`` is set, else offline;
+    ``embedder`` gives the offline brain its semantic fallback."""
     tools = ToolRegistry(ToolContext(robot, settings))
     if settings.llm.base_url:
         from sage_robot.brain.llm import LlmBrain
 
-        return LlmBrain(settings, tools, clock)
-    from sage_robot.brain.offline import OfflineBrain
-
-    return OfflineBrain(tools, settings.robot.name)
+        brain = LlmBrain(settings, tools, clock)
+        if embedder is not None:
+            brain.offline = OfflineBrain(tools, settings.robot.name, clock, embedder)
+        return brain
+    return OfflineBrain(tools, settings.robot.name, clock, embedder)
 
 
 class BrainNode(Node):
@@ -49,7 +60,9 @@ class BrainNode(Node):
     async def setup(self) -> None:
         self.robot = RobotLink(self.bus, waypoints_yaml(self.settings), self.settings.battery)
         self.robot.on_failure = self._nav_failed
-        self.brain = make_brain(self.settings, self.robot, self.clock)
+        self.brain = make_brain(
+            self.settings, self.robot, self.clock, lambda: self.ctx.resources.get(SENTENCE_EMBEDDER)
+        )
         self._lock = asyncio.Lock()
         self._last_turn = self.clock.now()
         self.turns = 0
@@ -75,15 +88,16 @@ class BrainNode(Node):
             self.brain.reset()
         self._last_turn = now
 
-    async def _converse(self, goal: Text, ctx: GoalContext) -> Text:
-        if not goal.data.strip():  # an empty transcript: nothing to think about
+    async def _converse(self, goal: Text | Utterance, ctx: GoalContext) -> Text:
+        heard, session = (goal.data, DEFAULT_SESSION) if isinstance(goal, Text) else (goal.text, goal.session)
+        if not heard.strip():  # an empty transcript: nothing to think about
             ctx.feedback(Text(UNKNOWN))
             return Text(UNKNOWN)
         async with self._lock:
             self._idle_check()
-            result = await self.brain.respond(goal.data, lambda s: ctx.feedback(Text(s)))
+            result = await self.brain.respond(heard, lambda s: ctx.feedback(Text(s)), session)
             self.turns += 1
-            self.log.debug("turn", heard=goal.data, reply=result.reply, brain=result.brain)
+            self.log.debug("turn", heard=heard, reply=result.reply, brain=result.brain, session=session)
             return Text(result.reply)
 
     def _say(self, sentence: str) -> None:

@@ -5,16 +5,24 @@ same tools the model uses (so `sage ask --json` shows the same tool calls) and a
 fixed, speakable lines. Knowledge questions are answered from the knowledge base: the
 best passage that is really about the question (:mod:`sage_robot.brain.answers`),
 trimmed to two or three sentences; when none is, an honest "I don't know".
+
+Each conversation (``session``) has its dialogue state (:mod:`sage_robot.brain.dialogue`):
+"yes", "take me there", "the second one", "what's there?" and "how far is it?" resolve
+against it. When keywords find nothing, a sentence embedding (:mod:`sage_robot.brain.semantic`)
+guesses the place, which is offered back, never driven to unasked; a weak guess gets a
+clarifying question.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-from sage_robot.brain.answers import Hit, kb_answer, place_passage, repeats, trim
-from sage_robot.brain.base import Brain, Say, Speaker, TurnResult
-from sage_robot.brain.intents import CONFIRM, DECLINE, Intent, classify, prepare
+from sage_robot.brain.answers import Hit, best_hit, place_of, place_passage, repeats, trim
+from sage_robot.brain.base import DEFAULT_SESSION, Brain, Say, Speaker, TurnResult
+from sage_robot.brain.dialogue import Dialogues, DialogueState, resolve
+from sage_robot.brain.intents import Intent, classify, prepare, strip_wake
 from sage_robot.brain.matching import clean
 from sage_robot.brain.phrases import (
     CAPABILITIES,
@@ -22,6 +30,7 @@ from sage_robot.brain.phrases import (
     GOODBYES,
     GREETINGS,
     UNKNOWN,
+    be,
     lower_first,
     pick,
     place_phrase,
@@ -31,8 +40,11 @@ from sage_robot.brain.phrases import (
 )
 from sage_robot.brain.readiness import Refusal
 from sage_robot.brain.robot import NavStatus
+from sage_robot.brain.semantic import EmbedderSource, SemanticMatcher, intent_from_guess
 from sage_robot.brain.speech import split_sentences
 from sage_robot.brain.tools import ToolCall, ToolRegistry
+from sage_robot.brain.tour_talk import TourTalk
+from sage_robot.core.clock import Clock
 from sage_robot.core.places import Place
 
 KB_TOP_K = 3
@@ -42,6 +54,8 @@ PLACES_SPOKEN = 6  # places named in a list before "and more"
 # A drive refused for these is answered with the refusal itself, a whole spoken sentence.
 SPOKEN_REFUSALS = frozenset({Refusal.ESTOP.value, Refusal.BATTERY.value, Refusal.LOST.value})
 ESTOP_STOPPED = "I am stopped: the emergency stop is on. An operator has to release it."
+WHERE_TO = "Where would you like to go? You can name a place, or tell me what you are looking for."
+CHOICES_SPOKEN = 4  # places named in a "which one?" question
 
 
 def join_names(names: list[str]) -> str:
@@ -79,12 +93,22 @@ class OfflineBrain(Brain):
 
     kind = "offline"
 
-    def __init__(self, tools: ToolRegistry, robot_name: str = "SAGE Jarvis") -> None:
+    def __init__(
+        self,
+        tools: ToolRegistry,
+        robot_name: str = "SAGE Jarvis",
+        clock: Clock | None = None,
+        embedder: EmbedderSource | None = None,
+    ) -> None:
         self.tools = tools
         self.robot = tools.ctx.robot
         self.name = robot_name
-        self._offer: Place | None = None  # a place offered after "where is ..."
+        self.clock = clock or self.robot.bus.clock
+        self.dialogues = Dialogues()
+        self.semantic = SemanticMatcher(embedder or (lambda: None))
+        self._state = DialogueState()  # the conversation of the turn being answered
         self._calls: list[ToolCall] = []
+        self.tour_talk = TourTalk(self._tool)  # planned tours: said, started on a "yes", controlled
         self._handlers: dict[str, Handler] = {
             "greeting": self._greeting,
             "goodbye": self._goodbye,
@@ -98,30 +122,50 @@ class OfflineBrain(Brain):
             "battery": self._battery,
             "ip_address": self._ip,
             "tour": self._tour,
+            "tour_control": self.tour_talk.control,
             "list_places": self._list_places,
             "describe_place": self._describe,
+            "distance": self._distance,
+            "suggest": self._suggest,
+            "clarify": self._clarify,
             "question": self._question,
             "unknown": self._unknown,
         }
 
-    def reset(self) -> None:
-        self._offer = None
+    def reset(self, session: str | None = None) -> None:
+        self.dialogues.reset(session)
 
     async def classify(self, text: str) -> Intent:
         return classify(text, await self.robot.places())
 
-    async def respond(self, text: str, say: Say | None = None) -> TurnResult:
+    async def respond(self, text: str, say: Say | None = None, session: str = DEFAULT_SESSION) -> TurnResult:
         result = TurnResult(brain=self.kind)
         speaker = Speaker(say, result)
         self._calls = result.tool_calls
-        intent = await self._follow_up(text) or await self.classify(text)
+        state = self._state = self.dialogues.get(session, self.clock.now())
+        intent = self.tour_talk.follow_up(text, session) or await self.understand(text, state)
         result.intent = intent.name
-        if intent.name != "where_is":
-            self._offer = None
+        state.offer = None  # an offer or a choice stands for one turn: the handler makes it again
+        state.clear_choices()
         reply = await self._handlers[intent.name](intent, text)
+        state.remember(text, reply, intent)
         for sentence in split_sentences(reply):
             speaker(sentence)
         return speaker.finish()
+
+    async def understand(self, text: str, state: DialogueState) -> Intent:
+        """The intent of ``text`` in this conversation: rules, then the dialogue state,
+        then the semantic guess when neither found what the visitor meant."""
+        places = await self.robot.places()
+        t = strip_wake(prepare(text))
+        intent = resolve(t, classify(text, places), state, places)
+        if intent.choices:
+            return Intent("clarify", intent.place, intent.name, intent.how, intent.choices)
+        wants_place = intent.name == "navigate" and intent.place is None
+        if intent.name != "unknown" and not wants_place:  # questions go to the KB, which knows more
+            return intent
+        guess = await self.semantic.guess(text, places, self.clock)
+        return intent_from_guess(intent, guess)
 
     async def react(self, prompt: str, fallback: str, say: Say | None = None) -> TurnResult:
         result = TurnResult(brain=self.kind, intent="event")
@@ -129,18 +173,6 @@ class OfflineBrain(Brain):
         for sentence in split_sentences(fallback):
             speaker(sentence)
         return speaker.finish()
-
-    async def _follow_up(self, text: str) -> Intent | None:
-        """'Yes' after 'shall I take you there?' goes there; 'no' drops the offer."""
-        if self._offer is None:
-            return None
-        t = prepare(text)
-        if CONFIRM.match(t) and len(t.split()) <= 4:
-            return Intent("navigate", self._offer, t, "offer")
-        if DECLINE.match(t):
-            self._offer = None
-            return Intent("goodbye", slot="no")
-        return None
 
     async def _tool(self, name: str, args: dict[str, Any] | None = None) -> ToolCall:
         call = await self.tools.call(name, args or {})
@@ -164,7 +196,7 @@ class OfflineBrain(Brain):
 
     async def _navigate(self, intent: Intent, text: str) -> str:
         if intent.place is None:
-            return await self._unknown_place(intent.slot)
+            return WHERE_TO if intent.how == "reference" else await self._unknown_place(intent.slot)
         call = await self._tool("set_goal", {"location": intent.place.name})
         if not call.result.ok:
             if call.result.data.get("refused") in SPOKEN_REFUSALS:
@@ -176,14 +208,14 @@ class OfflineBrain(Brain):
         """``offer`` (and remember it for a "yes"), or why the robot can not go now."""
         refused = self.robot.readiness().refuse_drive(place.name)
         if refused is None:
-            self._offer = place
+            self._state.offer = place
             return offer
-        self._offer = None
         return refused[1]
 
     async def _unknown_place(self, slot: str) -> str:
         places = await self.robot.places()
         names = [place_phrase(p) for p in places][:PLACES_SPOKEN]
+        slot = slot.removeprefix("to ")  # "take me to the moon": the slot is "to the moon"
         what = f" called {slot}" if slot and len(slot) < 40 else " by that name"
         if not names:
             return f"I do not know a place{what}, and I have no map of places loaded right now."
@@ -194,7 +226,7 @@ class OfflineBrain(Brain):
         assert intent.place is not None
         what = f": {lower_first(intent.place.description.rstrip('.'))}" if intent.place.description else ""
         offer = self._offer_to_go(intent.place, "Shall I take you there?")
-        return f"{upper_first(place_phrase(intent.place))} is on my map{what}. {offer}"
+        return f"{upper_first(place_phrase(intent.place))} {be(intent.place)} on my map{what}. {offer}"
 
     async def _cancel(self, intent: Intent, text: str) -> str:
         call = await self._tool("cancel_goal")
@@ -250,6 +282,9 @@ class OfflineBrain(Brain):
         return f"My address is {join_names(parts[:3])}."
 
     async def _tour(self, intent: Intent, text: str) -> str:
+        if intent.how in ("plan", "consent"):  # a tour planned for the visitor (brain/tour_talk.py)
+            refused = self.robot.readiness().refuse_tour()
+            return await self.tour_talk.handle(intent, text, refused[1] if refused else "")
         args = {"theme": intent.slot} if intent.slot else {}
         call = await self._tool("start_tour", args)
         if not call.result.ok:
@@ -263,11 +298,14 @@ class OfflineBrain(Brain):
         )
 
     async def _list_places(self, intent: Intent, text: str) -> str:
+        await self._tool("list_places")
         places = await self.robot.places()
         if not len(places):
             return "I have no places loaded right now."
-        names = [place_phrase(p) for p in places if p.name != "DOCKING_STATION"]
-        return f"I can take you to {join_names(names)}. Where would you like to go?"
+        shown = [p for p in places if p.name != "DOCKING_STATION"]
+        self._state.choices, self._state.choice_intent = tuple(shown), "navigate"
+        names = join_names([place_phrase(p) for p in shown])
+        return f"I can take you to {names}. Where would you like to go?"
 
     async def _describe(self, intent: Intent, text: str) -> str:
         """The place's description, then one or two sentences about it from the KB (else
@@ -300,8 +338,56 @@ class OfflineBrain(Brain):
         call = await self._tool("kb_search", {"query": text, "top_k": KB_TOP_K})
         if not call.result.ok:
             return f"I can not look that up, because {lower_first(call.result.error)}."
-        hits = [Hit.from_tool(p) for p in call.result.data["passages"]]
-        return kb_answer(text, hits) or DONT_KNOW
+        found = best_hit(text, [Hit.from_tool(p) for p in call.result.data["passages"]])
+        if found is None:
+            return DONT_KNOW
+        about = place_of(found, await self.robot.places())
+        if about is not None:  # the answer came from a place's own page: "take me there" goes there
+            self._state.place = about
+        return trim(found.text, text)
 
     async def _unknown(self, intent: Intent, text: str) -> str:
         return UNKNOWN
+
+    async def _suggest(self, intent: Intent, text: str) -> str:
+        """A place the semantic guess found: said back as a question, never driven to unasked."""
+        assert intent.place is not None
+        what = f", {lower_first(intent.place.description.rstrip('.'))}" if intent.place.description else ""
+        offer = self._offer_to_go(intent.place, "Shall I take you there?")
+        return f"Do you mean {place_phrase(intent.place)}{what}? {offer}"
+
+    async def _clarify(self, intent: Intent, text: str) -> str:
+        """Which of several places, or where to at all."""
+        if not intent.choices:
+            return WHERE_TO
+        shown = intent.choices[:CHOICES_SPOKEN]
+        self._state.choices = shown
+        self._state.choice_intent = "navigate" if intent.slot == "navigate" else "where_is"
+        names = [place_phrase(p) for p in shown]
+        more = len(intent.choices) - len(shown)
+        if more:
+            return f"There are {len(intent.choices)} of those: {', '.join(names)} and {more} more. Which one?"
+        return f"Which one do you mean: {', '.join(names[:-1])} or {names[-1]}?"
+
+    async def _distance(self, intent: Intent, text: str) -> str:
+        """How far a place is, in a straight line from the place we are nearest to."""
+        place = intent.place
+        if place is None:
+            return "How far is which place? Tell me where you would like to go."
+        call = await self._tool("where_am_i")
+        offer = self._offer_to_go(place, "Shall I take you there?")
+        if not call.result.ok:
+            how_far = f"how far {place_phrase(place)} {be(place)}"
+            return f"I am not sure where we are right now, so I can not say {how_far}. {offer}"
+        d = call.result.data
+        places = await self.robot.places()
+        if d["nearest_place"] == place.name and d["distance_m"] <= NEAR_M:
+            return f"We are right at {place_phrase(place)}."
+        here = places.get(d["nearest_place"]) if d["nearest_place"] in places else None
+        if here is None:
+            return f"I can not tell how far {place_phrase(place)} {be(place)} from here. {offer}"
+        meters = math.hypot(place.pose.x - here.pose.x, place.pose.y - here.pose.y) + d["distance_m"]
+        return (
+            f"{upper_first(place_phrase(place))} {be(place)} about {round(meters)} meters from here, "
+            f"as the crow flies. {offer}"
+        )

@@ -15,15 +15,62 @@ from sage_robot.core.places import Place
 
 _HAS_DIGIT = re.compile(r"\d")  # '3D', 'B2': said as written, not capitalized
 _WORDS = {"LAB": "Lab", "ENG": "Engineering", "BIO": "Bio", "ECE": "E C E"}
+# Names made only of these are common nouns, said in lower case: "the bathrooms".
+COMMON_NOUNS = frozenset({
+    "BATHROOM", "BATHROOMS", "RESTROOM", "RESTROOMS", "TOILETS", "DOCKING", "CHARGING", "STATION",
+    "LOBBY", "ENTRANCE", "EXIT", "ELEVATOR", "ELEVATORS", "STAIRS", "KITCHEN", "FRONT", "DESK", "MAIN",
+})  # fmt: skip
+# A kind of place a proper name may leave out; said after it when the description names
+# it: GUELLY_DELLY, "Engineering student café ..." → "the Guelly Delly café".
+KINDS = ("café", "cafe", "cafeteria", "restaurant", "library", "bookstore", "shop", "gym", "space")
+# A name ending in one of these already says what kind of place it is ("the Clean Room").
+NAMED_KINDS = frozenset({"lab", "center", "room", "station", "studio", "office", "hall", *KINDS})
+# Words that end in s but are not plurals ("Valpo Robotics is ...").
+_NOT_PLURAL = ("ss", "ics", "us", "is")
+
+
+def _name_words(name: str) -> list[str]:
+    return [w for w in name.replace("-", "_").split("_") if w]
 
 
 def place_phrase(place: Place | str) -> str:
-    """How to say a place: 'GUELLY_DELLY' → 'the Guelly Delly', 'ECE_LAB_1' → 'the E C E Lab 1',
-    '3D_PRINTING_LAB' → 'the 3D Printing Lab' (TTS says "3D"; "3 D" would be read as two words)."""
+    """How to say a place: 'GUELLY_DELLY' → 'the Guelly Delly' (with its description: 'the
+    Guelly Delly café'), 'ECE_LAB_1' → 'the E C E Lab 1', 'BATHROOMS' → 'the bathrooms',
+    '3D_PRINTING_LAB' → 'the 3D Printing Lab' (TTS says "3D"; "3 D" would be two words)."""
+    if isinstance(place, Place) and place.title:
+        title = str(place.title)
+        return title if title.lower().startswith("the ") else "the " + title
     name = place.name if isinstance(place, Place) else place
-    parts = [w for w in name.replace("-", "_").split("_") if w]
+    parts = _name_words(name)
+    if parts and all(w.upper() in COMMON_NOUNS for w in parts):
+        return "the " + " ".join(w.lower() for w in parts)
     words = [_WORDS.get(w, w if _HAS_DIGIT.search(w) else w.capitalize()) for w in parts]
-    return "the " + " ".join(words)
+    kind = _kind(place) if isinstance(place, Place) else ""
+    return "the " + " ".join([*words, kind] if kind else words)
+
+
+def _kind(place: Place) -> str:
+    """The kind of place its description names, when the name does not say it ('' if none)."""
+    said = {w.lower() for w in _name_words(place.name)}
+    if said & NAMED_KINDS:
+        return ""
+    desc = re.findall(r"[\w']+", place.description.lower())
+    for word in desc:
+        if word in KINDS and word not in said:
+            return str(word)
+    return ""
+
+
+def is_plural(place: Place | str) -> bool:
+    """'BATHROOMS' is plural ("the bathrooms are"); 'VALPO_ROBOTICS' is not."""
+    parts = _name_words(place.name if isinstance(place, Place) else place)
+    last = parts[-1].lower() if parts else ""
+    return last.endswith("s") and not last.endswith(_NOT_PLURAL)
+
+
+def be(place: Place | str) -> str:
+    """'are' for a plural place name, else 'is'."""
+    return "are" if is_plural(place) else "is"
 
 
 def pick(options: tuple[str, ...], key: str) -> str:
@@ -42,7 +89,7 @@ def welcome(place: Place | None, name: str) -> str:
     """The arrival line: the place, what it is, and up to two sentences of its talking points."""
     if place is None:
         return f"Here we are at {place_phrase(name)}."
-    line = f"Here we are at {place_phrase(place)}"
+    line = f"Here we are at {place_phrase(place.name)}"  # the description follows
     line += f", {lower_first(place.description.rstrip('.'))}." if place.description else "."
     if place.dwell_text:
         line += " " + first_sentences(place.dwell_text, 2)

@@ -11,15 +11,18 @@ from __future__ import annotations
 
 import math
 import socket
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import Field
 
+from sage_robot.brain import tour_tools
 from sage_robot.brain.matching import match_place, places_with_theme
 from sage_robot.brain.readiness import DOCK
 from sage_robot.brain.robot import Outcome
 from sage_robot.brain.tools import NoArgs, ToolArgs, ToolContext, ToolResult, tool
+from sage_robot.brain.tours import SECONDS_PER_MINUTE
 from sage_robot.core.config import read_secret
+from sage_robot.core.msgs.tour import TourCommand, TourRequest
 from sage_robot.core.places import Place, Places
 
 KB_PASSAGE_CHARS = 700  # passage text handed to the model per hit
@@ -29,6 +32,7 @@ MAX_TOUR_STOPS = 8
 KB_TOP_K_MAX = 10
 WEB_RESULTS_MAX = 8
 TOUR_PLACES_MAX = 12  # places a model may name for one tour (the first MAX_TOUR_STOPS are kept)
+TOUR_MINUTES_MAX = 240.0  # a visitor's time for a tour beyond this is a mistake
 
 
 class SetGoalArgs(ToolArgs):
@@ -276,7 +280,54 @@ async def start_tour(ctx: ToolContext, args: StartTourArgs) -> ToolResult:
         return _unknown_place(", ".join(unknown), places)
     if not stops:
         return ToolResult.fail(f"no place fits the theme {args.theme!r}", places=_place_list(places))
+    if tour_tools.runner_up(ctx.robot):  # the tour node: route order, pause/skip/resume, on the pages
+        refused = ctx.robot.readiness().refuse_tour()
+        if refused is not None:
+            return ToolResult.fail(refused[1], goal_started=False, refused=refused[0].value)
+        speed = ctx.settings.robot.max_linear_mps
+        state = await tour_tools.start_on_runner(ctx.robot, [p.name for p in stops], bool(args.places), speed)
+        if isinstance(state, str):
+            return ToolResult.fail(state, goal_started=False, refused="navigation")
+        return ToolResult(True, {"status": "touring", "goal_started": True, "stops": list(state.stops)})
     out = await ctx.robot.tour([p.name for p in stops])
     if not out.ok:
         return _not_started(out)
     return ToolResult(True, {"status": "touring", "goal_started": True, "stops": [p.name for p in stops]})
+
+
+class PlanTourArgs(ToolArgs):
+    interests: str | None = Field(None, max_length=200, description="what the visitor wants to see")
+    places: list[str] | None = Field(None, max_length=TOUR_PLACES_MAX, description="places the visitor named")
+    minutes: float | None = Field(None, gt=0, le=TOUR_MINUTES_MAX, description="the time the visitor has")
+
+
+class TourControlArgs(ToolArgs):
+    command: Literal["pause", "resume", "skip", "stop"] = Field(description="what to do with the tour")
+
+
+@tool(
+    "plan_tour",
+    "Plan a tour for the visitor (nothing moves): the places for their interests and time, in "
+    "route order, with the minutes it takes. Say the plan and ask; when they agree, call "
+    "start_tour with the plan's stops as places.",
+    PlanTourArgs,
+)
+async def plan_tour(ctx: ToolContext, args: PlanTourArgs) -> ToolResult:
+    budget = (args.minutes or 0.0) * SECONDS_PER_MINUTE
+    request = TourRequest(args.interests or "", tuple(args.places or ()), budget)
+    plan = await tour_tools.request_plan(ctx.robot, request, ctx.settings.robot.max_linear_mps)
+    if not plan.ok:
+        return ToolResult.fail(plan.reason, **({"left_out": list(plan.dropped)} if plan.dropped else {}))
+    return ToolResult(True, tour_tools.plan_data(plan))
+
+
+@tool("tour_control", "Pause, resume, skip the current stop of, or stop the running tour.", TourControlArgs)
+async def tour_control(ctx: ToolContext, args: TourControlArgs) -> ToolResult:
+    if args.command == "resume" and tour_tools.runner_up(ctx.robot):
+        refused = ctx.robot.readiness().refuse_tour()
+        if refused is not None:
+            return ToolResult.fail(refused[1], refused=refused[0].value)
+    state = await tour_tools.command(ctx.robot, TourCommand(args.command, by="brain"))
+    if isinstance(state, str):
+        return ToolResult.fail(state)
+    return ToolResult(True, tour_tools.state_data(state))

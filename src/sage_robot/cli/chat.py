@@ -5,6 +5,11 @@ offline brain. ``--sim`` starts the simulated robot, navigation and the knowledg
 (:data:`SIM_NODES`) in this process first, so "take me to the café" really drives;
 without it, tools that need navigation say it is not running. ``--with NODE`` adds single
 nodes (e.g. ``kb`` for knowledge questions).
+
+``sage chat --json`` reads one utterance per line from standard input and prints one JSON
+reply per line (the fields of ``sage ask --json``), all in one conversation, so multi-turn
+dialogues can be scripted. The offline brain's semantic fallback gets all-MiniLM-L6-v2
+(the KB's embedder, from its installed package), loaded the first time it is needed.
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ import asyncio
 import json
 import sys
 import threading
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from typing import Any
 
 from sage_robot.app.launcher import Launcher
@@ -29,13 +34,37 @@ ASK_TIMEOUT_S = 120.0  # longest a single `sage ask` turn may take
 # voice (its models load for seconds), the web server (:8000) or Foxglove (:8765).
 SIM_NODES = (
     "sim_world", "mcu_sim", "serial_bridge", "map_server", "localization", "navigator", "kb", "brain",
+    "tour",  # planned tours: "I have ten minutes, show me the labs"
 )  # fmt: skip
 PROMPT = "you> "
+CHAT_SESSION = "chat"  # the dialogue session of a `sage chat` conversation
+
+
+class LazyEmbedder:
+    """all-MiniLM-L6-v2, loaded on the first ``embed`` (a turn that needs the semantic
+    fallback), so a chat that never needs it does not pay for it."""
+
+    name = "all-MiniLM-L6-v2"
+    dim = 384
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._model: Any = None
+
+    def embed(self, texts: Sequence[str]) -> Any:
+        with self._lock:
+            if self._model is None:
+                from sage_robot.kb.embed import MiniLmEmbedder
+
+                self._model = MiniLmEmbedder()
+        return self._model.embed(texts)
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser("chat", help="talk with the robot's brain in the terminal")
     _common(p)
+    p.add_argument("--json", action="store_true",
+                   help="read one utterance per line from stdin, print one JSON reply per line")  # fmt: skip
     p.set_defaults(func=run_chat)
     p = sub.add_parser("ask", help="one turn with the brain: prints the reply (and tool calls)")
     p.add_argument("text", help="what the visitor says")
@@ -73,9 +102,12 @@ def _session(
     args: argparse.Namespace, with_brain: bool, body: Callable[[NodeContext], Awaitable[Any]]
 ) -> Any:
     """Start the nodes, run ``body`` beside them, stop everything when it returns."""
+    from sage_robot.core.embedding import SENTENCE_EMBEDDER
+
     settings = _settings(args)
     names, simulated = _node_names(args, with_brain)
     ctx = make_context(settings, simulated=simulated)
+    ctx.resources[SENTENCE_EMBEDDER] = LazyEmbedder()
     specs = specs_for_names(names, dict(PROFILES["sim"]) if args.sim else {})
     out: dict[str, Any] = {}
 
@@ -111,21 +143,9 @@ def run_ask(args: argparse.Namespace) -> int:
         raise ConfigError("sage ask: the text to say is empty")
 
     async def one_turn(ctx: NodeContext) -> dict[str, Any]:
-        from sage_robot.brain.node import make_brain
-        from sage_robot.brain.robot import RobotLink
-        from sage_robot.core import topics
-        from sage_robot.core.msgs import BatteryState
-        from sage_robot.core.paths import waypoints_yaml
-
-        robot = RobotLink(ctx.bus, waypoints_yaml(ctx.settings))
-        sub = ctx.bus.subscribe(topics.BATTERY, BatteryState, robot.on_battery, maxsize=1)
-        try:
-            brain = make_brain(ctx.settings, robot, ctx.clock)
-            result = await asyncio.wait_for(brain.respond(args.text), ASK_TIMEOUT_S)
-        finally:
-            sub.close()
-            await robot.close()
-        return result.as_dict()
+        replies: list[dict[str, Any]] = []
+        await _direct_turns(ctx, _one(args.text), replies.append)
+        return replies[0]
 
     result = _session(args, with_brain=False, body=one_turn)
     if args.json:
@@ -133,6 +153,35 @@ def run_ask(args: argparse.Namespace) -> int:
     else:
         print(result["reply"])
     return 0
+
+
+async def _one(text: str) -> AsyncIterator[str]:
+    yield text
+
+
+async def _direct_turns(
+    ctx: NodeContext, lines: AsyncIterator[str], out: Callable[[dict[str, Any]], None]
+) -> None:
+    """Each utterance of ``lines`` answered by a brain made here, in one conversation;
+    ``out`` gets each turn's ``as_dict()``."""
+    from sage_robot.brain.node import make_brain
+    from sage_robot.brain.robot import RobotLink
+    from sage_robot.core import topics
+    from sage_robot.core.embedding import SENTENCE_EMBEDDER
+    from sage_robot.core.msgs import BatteryState
+    from sage_robot.core.paths import waypoints_yaml
+
+    robot = RobotLink(ctx.bus, waypoints_yaml(ctx.settings))
+    sub = ctx.bus.subscribe(topics.BATTERY, BatteryState, robot.on_battery, maxsize=1)
+    try:
+        embedder = ctx.resources.get(SENTENCE_EMBEDDER)
+        brain = make_brain(ctx.settings, robot, ctx.clock, lambda: embedder)
+        async for line in lines:
+            result = await asyncio.wait_for(brain.respond(line, session=CHAT_SESSION), ASK_TIMEOUT_S)
+            out(result.as_dict())
+    finally:
+        sub.close()
+        await robot.close()
 
 
 # ---------------------------------------------------------------- sage chat
@@ -150,6 +199,10 @@ def _stdin_lines(loop: asyncio.AbstractEventLoop, queue: asyncio.Queue[str | Non
 
 
 def run_chat(args: argparse.Namespace) -> int:
+    if args.json:
+        _session(args, with_brain=False, body=_json_conversation)
+        return 0
+
     async def conversation(ctx: NodeContext) -> None:
         from sage_robot.core import topics
         from sage_robot.core.msgs import Text
@@ -175,11 +228,24 @@ def run_chat(args: argparse.Namespace) -> int:
     return 0
 
 
-async def _chat_turn(ctx: NodeContext, line: str) -> None:
-    from sage_robot.core import topics
-    from sage_robot.core.msgs import Text
+async def _json_conversation(ctx: NodeContext) -> None:
+    """`sage chat --json`: one JSON line out per non-blank line in, until end of input."""
+    queue: asyncio.Queue[str | None] = asyncio.Queue()
+    _stdin_lines(asyncio.get_running_loop(), queue)
 
-    handle = await ctx.bus.actions.send_goal(topics.CONVERSE, Text(line))
+    async def lines() -> AsyncIterator[str]:
+        while (line := await queue.get()) is not None:
+            if line.strip():
+                yield line
+
+    await _direct_turns(ctx, lines(), lambda reply: print(json.dumps(reply), flush=True))
+
+
+async def _chat_turn(ctx: NodeContext, line: str) -> None:
+    from sage_robot.brain.base import Utterance
+    from sage_robot.core import topics
+
+    handle = await ctx.bus.actions.send_goal(topics.CONVERSE, Utterance(line, CHAT_SESSION))
     async for sentence in handle.feedback():
         print(f"sage> {sentence.data}", flush=True)
     result = await handle.result()

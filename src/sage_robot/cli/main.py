@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from sage_robot.core.errors import SageError
 
-COMMANDS = ["run", "doctor", "bench", "version", "ops", "mcu", "kb", "chat", "voice", "slam"]
+COMMANDS = ["run", "doctor", "bench", "version", "ops", "mcu", "kb", "chat", "voice", "slam", "topic"]
 
 
 def build_parser() -> argparse.ArgumentParser:

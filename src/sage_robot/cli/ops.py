@@ -11,8 +11,11 @@ import sys
 import urllib.error
 import urllib.request
 from pathlib import Path
+from typing import Any
 
 from sage_robot.core.errors import SageError
+
+ZENOH_PROBE_S = 0.5  # `sage status` asks Zenoh this long first when the profile's bus is local
 
 SERVICE_TEMPLATE = """[Unit]
 Description=SAGE tour robot ({mode})
@@ -50,8 +53,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--nodes", nargs="*", default=["foxglove"], help="nodes to run beside the replay")
     p.set_defaults(func=run_replay)
 
-    p = sub.add_parser("status", help="health of every node of a running robot (from its web server)")
-    p.add_argument("--url", help="robot web address (default http(s)://127.0.0.1:<web.port>, per web.tls)")
+    p = sub.add_parser(
+        "status", help="health of every node of a running robot (over Zenoh, else from its web server)"
+    )
+    p.add_argument(
+        "--url",
+        help="ask this web address only (default: Zenoh first, then http(s)://127.0.0.1:<web.port>)",
+    )
     p.add_argument("--json", action="store_true", help="print the raw JSON")
     p.set_defaults(func=run_status)
 
@@ -105,16 +113,11 @@ def run_replay(args: argparse.Namespace) -> int:
 
 def run_status(args: argparse.Namespace) -> int:
     from sage_robot.core.config import load_profile
-    from sage_robot.web.tls import client_context, local_url
 
-    web = load_profile(args.profile).web
-    url = (args.url or local_url(web)).rstrip("/") + "/api/health"
-    try:
-        context = client_context(web) if url.startswith("https:") else None
-        with urllib.request.urlopen(url, timeout=5, context=context) as resp:
-            report = json.load(resp)
-    except (urllib.error.URLError, OSError) as exc:
-        raise SageError(f"no robot answers at {url} ({exc}); is `sage sim` or `sage up` running?") from None
+    settings = load_profile(args.profile)
+    report = None if args.url else health_over_zenoh(settings)
+    if report is None:
+        report = _health_over_web(settings, args.url)
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
@@ -124,6 +127,47 @@ def run_status(args: argparse.Namespace) -> int:
         print(f"{name:<18} {h.get('state', '?'):<9} {h.get('restarts', 0):>8}  {h.get('last_error', '')}")
     bad = [n for n, h in nodes.items() if h.get("state") != "running"]
     return 1 if bad else 0
+
+
+def health_over_zenoh(settings: Any) -> dict[str, Any] | None:
+    """The robot's ``/sage/health`` asked over Zenoh (no robot started here), shaped like the
+    web's ``/api/health``; None when Zenoh is not installed or no robot answers in time."""
+    import dataclasses
+
+    from sage_robot.core import topics
+
+    try:
+        from sage_robot.core.transport.remote import RemoteRobot
+    except ImportError:
+        return None
+    bus = settings.bus
+    timeout = bus.zenoh.open_timeout_s if bus.transport == "zenoh" else ZENOH_PROBE_S
+    try:
+        with RemoteRobot(bus, timeout_s=timeout) as robot:
+            report = robot.last(topics.HEALTH) if robot.wait_connected() else None
+    except SageError:
+        return None
+    if report is None:
+        return None
+    return {
+        "nodes": {h.name: dataclasses.asdict(h) for h in report.nodes},
+        "time": report.stamp,
+        "robot": settings.robot.name,
+        "via": "zenoh",
+    }
+
+
+def _health_over_web(settings: Any, url_arg: str | None) -> Any:
+    from sage_robot.web.tls import client_context, local_url
+
+    web = settings.web
+    url = (url_arg or local_url(web)).rstrip("/") + "/api/health"
+    try:
+        context = client_context(web) if url.startswith("https:") else None
+        with urllib.request.urlopen(url, timeout=5, context=context) as resp:
+            return json.load(resp)
+    except (urllib.error.URLError, OSError) as exc:
+        raise SageError(f"no robot answers at {url} ({exc}); is `sage sim` or `sage up` running?") from None
 
 
 def run_install_service(args: argparse.Namespace) -> int:

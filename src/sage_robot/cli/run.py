@@ -19,11 +19,14 @@ from typing import Any
 
 from sage_robot.app.runtime import make_context, run_launcher, specs_for
 from sage_robot.app.supervisor import SUPERVISED_ENV, supervise
+from sage_robot.cli.processes import add_process_flags, run_as_processes, wants_processes
 from sage_robot.core.config import Settings, load_profile
 from sage_robot.core.errors import ConfigError
 
 HEADLESS_SKIP = {"web", "foxglove"}  # network listeners: a headless run opens none
 WEB_NODE = "web"
+ROS2_NODE = "ros2_bridge"  # `--ros2`: the topics on a ROS 2 network too (rmw_zenoh), docs/operations.md
+ROS2_HELP = "also bridge the topics to ROS 2 over Zenoh (rmw_zenoh; ROS_DOMAIN_ID, SAGE_ROS2_CONNECT)"
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -36,6 +39,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--seed", type=int, help="world random seed")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     p.add_argument("--nodes", help="run only these nodes of the sim profile (comma-separated)")
+    p.add_argument("--ros2", action="store_true", help=ROS2_HELP)
+    add_process_flags(p)
     p.set_defaults(func=run_sim)
 
     p = sub.add_parser("up", help="start the real robot's nodes from the profile")
@@ -49,6 +54,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="run without the parent process that stops the motors when SAGE dies or freezes "
         "(only where something else does that job, e.g. systemd's ExecStopPost)",
     )
+    p.add_argument("--ros2", action="store_true", help=ROS2_HELP)
+    add_process_flags(p)
     p.set_defaults(func=run_up)
 
 
@@ -108,6 +115,16 @@ def sim_specs(headless: bool, nodes: str | None = None) -> list[Any]:
     return specs
 
 
+def ros2_specs(mode: str) -> list[Any]:
+    """The ROS 2 bridge's node spec (``--ros2``); its environment is checked here, so a bad
+    ``ROS_DOMAIN_ID`` is a one-line error at start, not a node that keeps failing."""
+    spec = specs_for(mode, [ROS2_NODE])[-1]  # a clear error when the ops extra is missing
+    from sage_robot.app.ros2_bridge import Ros2BridgeSettings
+
+    Ros2BridgeSettings.from_env(os.environ)
+    return [spec]
+
+
 def run_sim(args: argparse.Namespace) -> int:
     from sage_robot.sim.node import SCENARIO_RESOURCE, SUMMARY_RESOURCE, WORLD_RESOURCE
     from sage_robot.sim.scenario import load_scenario
@@ -117,10 +134,16 @@ def run_sim(args: argparse.Namespace) -> int:
     duration = args.duration if args.duration is not None else (scenario.duration_s if scenario else None)
     if duration is not None and duration <= 0:
         raise ConfigError(f"--duration must be > 0 s, got {duration}")
+    if wants_processes(args):  # each process group in its own process (cli/processes.py)
+        extra = ros2_specs("sim") if getattr(args, "ros2", False) else []
+        return run_as_processes(args, settings, "sim", sim_specs(args.headless, args.nodes) + extra,
+                                _overrides(args, scenario))
     ctx = make_context(settings, simulated=True)
     if scenario is not None:
         ctx.resources[SCENARIO_RESOURCE] = scenario
     specs = sim_specs(args.headless, args.nodes)
+    if getattr(args, "ros2", False):
+        specs += ros2_specs("sim")
     names = [s.name for s in specs]
     speed = "as fast as possible" if settings.sim.speed is None else f"{settings.sim.speed:g}x real time"
     if not args.json:
@@ -185,6 +208,10 @@ def run_up(args: argparse.Namespace) -> int:
         # This process becomes the supervisor; the robot runs in a child that it watches.
         child = [sys.executable, "-m", "sage_robot.cli.main", *sys.argv[1:]]
         return supervise(child, settings.mcu.port, settings.mcu.baud, firmware=settings.mcu.firmware)
+    if wants_processes(args):
+        extra = ros2_specs(args.mode) if getattr(args, "ros2", False) else []
+        return run_as_processes(args, settings, args.mode, specs_for(args.mode) + extra, imu or {})
     ctx = make_context(settings, simulated=False)
-    asyncio.run(run_launcher(ctx, specs_for(args.mode)))
+    extra = ros2_specs(args.mode) if getattr(args, "ros2", False) else []
+    asyncio.run(run_launcher(ctx, specs_for(args.mode) + extra))
     return 0

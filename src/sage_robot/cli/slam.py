@@ -7,7 +7,10 @@
   the ``/slam/save`` bus service saves on demand while it runs.
 - ``sage slam replay LOG [--out DIR] [--name NAME] [--limit N]``: run the same SLAM over a
   CARMEN log (FLASER / ROBOTLASER1 / ODOM, optionally gzipped) with a progress bar and write
-  map, pose graph and trajectory.
+  map, pose graph and trajectory; ends with a quality report (loops closed, residuals of the
+  optimised pose graph per edge kind), also in ``--json`` under ``"quality"``.
+- ``sage slam tour NAME [--out DIR]``: make a saved map the tour map: writes
+  ``DIR/NAME.profile.yaml`` (and ``NAME.waypoints.yaml``); ``sage sim --profile …`` tours it.
 - ``sage slam save NAME [--url URL]``: save the running session (``sage slam`` or ``sage up
   --mode slam``) as NAME through its web server (``POST /api/slam/save``, like ``sage status``
   reaches a robot): logs in as the operator with ``SAGE_OPERATOR_PASSWORD`` or the stored
@@ -57,13 +60,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     v.add_argument("--out", help="with --from: output directory (default: ./maps)")
     v.add_argument("--resolution", type=float, default=0.05, help="with --from: map cell size (m)")
     v.set_defaults(func=run_save)
+    t = ssub.add_parser("tour", help="make a saved map the tour map (writes NAME.profile.yaml)")
+    t.add_argument("name", help="the saved map's name (DIR/NAME.yaml)")
+    t.add_argument("--out", help="the maps' directory (default: slam.out_dir, else ./maps)")
+    t.set_defaults(func=run_tour)
 
 
 def run_mapping(args: argparse.Namespace) -> int:
-    from sage_robot.app.runtime import make_context, run_launcher, specs_for
+    from sage_robot.app.runtime import run_launcher, specs_for
     from sage_robot.core.config import load_profile
     from sage_robot.core.errors import ConfigError
-    from sage_robot.nav.slam.node import AUTOSAVE_RESOURCE, OUT_DIR_RESOURCE, SAVED_RESOURCE
+    from sage_robot.nav.slam.node import SAVED_RESOURCE
     from sage_robot.nav.slam.store import check_name
 
     check_name(args.name)
@@ -71,9 +78,7 @@ def run_mapping(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
     overrides = {"sim": {"speed": args.speed}} if args.speed else None
     settings = load_profile(args.profile, overrides)
-    ctx = make_context(settings, simulated=True)
-    ctx.resources[OUT_DIR_RESOURCE] = str(Path(args.out or settings.slam.out_dir or DEFAULT_OUT).resolve())
-    ctx.resources[AUTOSAVE_RESOURCE] = args.name
+    ctx = mapping_context(settings, args.out, args.name)
     specs = [s for s in specs_for("sim_slam") if not (args.headless and s.name == "web")]
     print(f"SAGE SLAM in simulation: {', '.join(s.name for s in specs)}; Ctrl-C to stop and save")
     asyncio.run(run_launcher(ctx, specs, until=args.duration))
@@ -83,6 +88,38 @@ def run_mapping(args: argparse.Namespace) -> int:
         return 0
     print("no map saved (no scans were mapped)")
     return 1
+
+
+def mapping_context(settings: Any, out: str | None, name: str) -> Any:
+    """The simulated robot's context for mapping: maps go to ``out`` (else ``slam.out_dir``,
+    else ./maps), the session is saved as ``name`` on exit, and the map frame is the
+    building's (the first scan is mapped at the robot's start pose, ``nav.initial_place``),
+    so places added on the new map stand where they are in the simulated building."""
+    from sage_robot.app.runtime import make_context
+    from sage_robot.core.paths import waypoints_yaml
+    from sage_robot.core.places import Places, load_places
+    from sage_robot.nav.slam.node import AUTOSAVE_RESOURCE, INITIAL_POSE_RESOURCE, OUT_DIR_RESOURCE
+    from sage_robot.sim.setup import pose_resolver
+
+    ctx = make_context(settings, simulated=True)
+    ctx.resources[OUT_DIR_RESOURCE] = str(Path(out or settings.slam.out_dir or DEFAULT_OUT).resolve())
+    ctx.resources[AUTOSAVE_RESOURCE] = name
+    wp = waypoints_yaml(settings)
+    places = load_places(wp) if wp.exists() else Places([], str(wp))
+    start = pose_resolver(places)(settings.nav.initial_place, "nav.initial_place")
+    ctx.resources[INITIAL_POSE_RESOURCE] = start
+    return ctx
+
+
+def run_tour(args: argparse.Namespace) -> int:
+    from sage_robot.core.config import load_profile
+    from sage_robot.nav.slam.tour import make_tour_profile
+
+    settings = load_profile(args.profile)
+    tour = make_tour_profile(settings, args.out or settings.slam.out_dir or DEFAULT_OUT, args.name)
+    print(f"tour map: {tour.map} ({tour.places} places in {tour.waypoints})")
+    print(f"profile: {tour.profile}\ntour it: sage sim --profile {tour.profile}")
+    return 0
 
 
 def run_save(args: argparse.Namespace) -> int:
@@ -163,7 +200,7 @@ def _post(opener: Any, base: str, route: str, body: dict[str, Any]) -> dict[str,
 def run_replay(args: argparse.Namespace) -> int:
     from sage_robot.core.errors import ConfigError
     from sage_robot.nav.slam.carmen import read_log
-    from sage_robot.nav.slam.replay import replay_log
+    from sage_robot.nav.slam.replay import format_report, quality_report, replay_log
     from sage_robot.nav.slam.store import build_map, save_session
 
     if args.limit is not None and args.limit < 1:
@@ -175,6 +212,7 @@ def run_replay(args: argparse.Namespace) -> int:
     slam = result.slam
     name = args.name or Path(args.log).name.split(".")[0]
     paths = save_session(slam, args.out, name, build_map(slam, args.resolution))
+    quality = quality_report(slam)
     summary = {
         "log": str(args.log),
         "scans": len(result.log.scans),
@@ -183,6 +221,7 @@ def run_replay(args: argparse.Namespace) -> int:
         "seconds": round(result.seconds, 2),
         "realtime_factor": round(result.realtime_factor, 2),
         **paths,
+        "quality": quality,
     }
     if args.json:
         print(json.dumps(summary))
@@ -192,4 +231,5 @@ def run_replay(args: argparse.Namespace) -> int:
             f"closures in {summary['seconds']} s ({summary['realtime_factor']}x real time)"
         )
         print(f"map: {paths['yaml']}\ntrajectory: {paths['trajectory']}\npose graph: {paths['graph']}")
+        print(format_report(quality))
     return 0

@@ -22,11 +22,20 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     t.add_argument("--json", action="store_true", help="print text, confidence, segments as JSON")
     t.set_defaults(func=cmd_transcribe)
 
-    w = vsub.add_parser("wake", help="find wake words in an audio file")
-    w.add_argument("file")
+    w = vsub.add_parser("wake", help="find wake words in an audio file, or calibrate a model",
+                        description="sage voice wake FILE: find wake words in it. "
+                        "sage voice wake calibrate --model M --positives DIR --negatives DIR: pick "
+                        "M's threshold and patience from recordings (written to --profile FILE)."
+                        )  # fmt: skip
+    w.add_argument("file", help="an audio file, or 'calibrate'")
     w.add_argument("--model", action="append", help="bundled name or .onnx path (repeatable)")
     w.add_argument("--threshold", type=float, help="score threshold (default: the profile's)")
-    w.add_argument("--json", action="store_true", help="print detections and max scores as JSON")
+    w.add_argument("--json", action="store_true", help="print the result as JSON")
+    w.add_argument("--positives", help="calibrate: folder of wake-phrase clips")
+    w.add_argument("--negatives", help="calibrate: folder of recordings without the wake phrase")
+    w.add_argument("--max-fa-per-hour", type=float, default=None,
+                   help="calibrate: false accepts per hour of negatives allowed (default 1)")  # fmt: skip
+    w.add_argument("--dry-run", action="store_true", help="calibrate: do not write the profile")
     w.set_defaults(func=cmd_wake)
 
     s = vsub.add_parser("say", help="speak text on the speaker, or write it to a WAV file")
@@ -57,20 +66,28 @@ def cmd_transcribe(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"file": args.file, **result.as_dict()}))
     else:
-        print(result.text if result.text else "(no speech)")
+        print(result.text if result.text else "(unclear: nothing trustworthy was heard)"
+              if result.unclear else "(no speech)")  # fmt: skip
     return 0
 
 
 def cmd_wake(args: argparse.Namespace) -> int:
     from sage_robot.core.audio import SAMPLE_RATE_HZ
+    from sage_robot.core.errors import ConfigError
+
+    if args.file == "calibrate":
+        from sage_robot.cli.voice_calibrate import cmd_calibrate
+
+        return cmd_calibrate(args)
+    if args.positives or args.negatives or args.max_fa_per_hour is not None:
+        raise ConfigError("--positives, --negatives and --max-fa-per-hour are for "
+                          "'sage voice wake calibrate'")  # fmt: skip
     from sage_robot.voice.audio_io import load_audio
     from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector
 
     vs = _settings(args)
     threshold = vs.wake_threshold if args.threshold is None else args.threshold  # reported
     if not 0 <= threshold <= 1:
-        from sage_robot.core.errors import ConfigError
-
         raise ConfigError(f"--threshold must be between 0 and 1, got {threshold}")
     pcm = load_audio(args.file)
     engine = OpenWakeWordEngine(args.model or vs.wake_models)
@@ -152,9 +169,11 @@ async def _listen(vs: Any, seconds: float | None) -> int:
                 print(f"[wake] {d.model} {d.score:.2f}", flush=True)
             utt = rec.push(frame, await asyncio.to_thread(vad.frame_probability, frame))
             if utt is not None and utt.reason is not EndReason.NO_SPEECH:
-                text = (await asyncio.to_thread(stt.transcribe, utt.pcm)).text
-                if text:
-                    print(text, flush=True)
+                heard = await asyncio.to_thread(stt.transcribe, utt.pcm)
+                if heard.unclear or (heard.text and heard.confidence < vs.stt_min_confidence):
+                    print("(did not catch that)", flush=True)
+                elif heard.text:
+                    print(heard.text, flush=True)
     finally:
         mic.close()
     return 0

@@ -75,7 +75,9 @@ class PlainName(Protocol):
 
 class Transport(ABC):
     """Carries publications beyond this process. The bus calls :meth:`send` for every local
-    publication and hands :meth:`attach` a function that delivers remote ones locally."""
+    publication and hands :meth:`attach` a function that delivers remote ones locally (from
+    any thread: the bus moves them onto its loop; a process's own publications must not come
+    back to it)."""
 
     @abstractmethod
     def attach(self, deliver: Callable[[str, Any], None]) -> None: ...
@@ -197,7 +199,8 @@ class Bus:
     def __init__(self, clock: Clock | None = None, transport: Transport | None = None) -> None:
         self.clock = clock or WallClock()
         self.transport = transport or LocalTransport()
-        self.transport.attach(self._deliver_local)
+        self.remote_rejected = 0  # remote messages not delivered (wrong type, no loop yet)
+        self.transport.attach(self._deliver_remote)
         self._topics: dict[str, TopicInfo] = {}
         self._services: dict[str, ServiceInfo] = {}
         self._taps: list[Callable[[str, Any], None]] = []
@@ -273,6 +276,25 @@ class Bus:
             sub._push(msg)
         for tap in self._taps:
             tap(name, msg)
+
+    def _deliver_remote(self, name: str, msg: Any) -> None:
+        """A transport's delivery, from any thread: on the loop, checked against the topic's
+        type, then as a local publication (never sent back out)."""
+        loop = self._loop
+        if loop is None or loop.is_closed():
+            self.remote_rejected += 1  # nobody here has subscribed or published yet
+            return
+        if threading.get_ident() != self._loop_thread:
+            with contextlib.suppress(RuntimeError):  # the loop closed in between: shutting down
+                loop.call_soon_threadsafe(self._deliver_remote, name, msg)
+            return
+        info = self._topics.get(name)
+        if info is not None and not isinstance(msg, info.msg_type):
+            self.remote_rejected += 1
+            _log.warning("remote %s on %s dropped: the topic carries %s", type(msg).__name__, name,
+                         info.msg_type.__name__)
+            return
+        self._deliver_local(name, msg)
 
     def add_tap(self, tap: Callable[[str, Any], None]) -> Callable[[], None]:
         """See every publication on every topic (recorders, live views). Returns a remover.

@@ -28,6 +28,8 @@ from sage_robot.core.msgs.std import (
     Text,
     Twist,
 )
+from sage_robot.core.msgs.clock import SimTime
+from sage_robot.core.msgs.tour import TourState
 from sage_robot.core.msgs.voice import AudioChunk, Doa, TurnLatency, UiState
 
 # Topics
@@ -57,6 +59,7 @@ NAV_STATE = Topic("/nav/state", NavigateFeedback)  # the navigator's state whoev
 #   (published on every change and at 1 Hz while a goal runs; IDLE when none)
 LOC_HEALTH = Topic("/localization/health", LocalizationHealth)
 MAP_ODOM = Topic("/localization/map_odom", PoseStamped)  # pose of the odom frame in the map (map->odom)
+TOUR_STATE = Topic("/sage/tour", TourState)  # latched: the visitor's tour (brain's tour node)
 
 # Simulator-only truth (tests and benchmarks read these; nodes above sim never do)
 SIM_TRUTH = Topic("/sim/ground_truth", Odometry)  # in the map frame
@@ -66,6 +69,7 @@ SIM_VISITOR_SAY = Topic("/sim/visitor_say", Text)  # a simulated visitor speaks 
 SIM_VISITOR_AUDIO = Topic("/sim/visitor_audio", AudioChunk)  # recorded audio played into the sim mic
 SIM_SPEAKER_BEARING = Topic("/sim/speaker_bearing", Doa)  # simulated visitor's bearing (truth)
 SIM_SPEAKER = Topic("/sim/speaker", SpeakerBearing)  # nearest person within 3 m (or none), with distance
+CLOCK = Topic("/clock", SimTime)  # the simulator's time, for processes that follow it (use_sim_time)
 
 # Actions and services
 NAVIGATE_TO = "navigate_to"  # action: nav.NavigateGoal -> nav.NavigateResult
@@ -78,3 +82,5 @@ WHERE_AM_I = "/nav/where_am_i"  # service
 KB_SEARCH = "/kb/search"  # service: kb.SearchRequest -> kb.SearchResponse
 GLOBAL_LOCALIZATION = "/localization/global"  # service: Text (any) -> LocalizationHealth; relocalize
 CLEAR_COSTMAPS = "/nav/clear_costmaps"  # service: Text (any) -> Text; forget scan obstacles
+TOUR_PLAN = "/sage/tour/plan"  # service: tour.TourRequest -> tour.TourPlan (brain's tour node)
+TOUR_CONTROL = "/sage/tour/control"  # service: tour.TourCommand -> tour.TourState (start/pause/...)

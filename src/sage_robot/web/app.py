@@ -18,7 +18,7 @@ from fastapi.responses import FileResponse, JSONResponse, RedirectResponse, Resp
 from fastapi.staticfiles import StaticFiles
 
 from sage_robot.core.log import get_logger
-from sage_robot.web import admin, api, slam_api, sockets, talk
+from sage_robot.web import admin, api, slam_api, sockets, talk, tour_api
 from sage_robot.web.auth import SESSION_COOKIE
 from sage_robot.web.common import WebState, client_key, is_operator, json_body, state_of
 from sage_robot.web.guard import RequestGuard
@@ -59,6 +59,7 @@ def create_app(state: WebState) -> FastAPI:
     app.include_router(sockets.router)
     app.include_router(talk.router)
     app.include_router(slam_api.router)
+    app.include_router(tour_api.router)
     admin.mount_kb(app, state)
     app.mount("/static", StaticFiles(directory=static_dir()), name="static")
     return app

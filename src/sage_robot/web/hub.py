@@ -40,10 +40,12 @@ from sage_robot.core.msgs import (
 )
 from sage_robot.core.msgs.nav import LocalizationHealth
 from sage_robot.core.msgs.sim import People
+from sage_robot.core.msgs.tour import TourState
 from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
 from sage_robot.core.node import Node
 from sage_robot.web import views
 from sage_robot.web.navstate import NavTracker
+from sage_robot.web.tour_api import tour_json
 
 # Minimum seconds between two sends of a channel to one client (phones on Wi-Fi).
 MIN_INTERVAL_S: dict[str, float] = {
@@ -61,6 +63,7 @@ MIN_INTERVAL_S: dict[str, float] = {
     "estop": 0.0,
     "teleop": 0.0,
     "nav": 0.2,
+    "tour": 0.2,
     "captions": 0.1,
     "camera": 1.0 / 15.0,  # frames/s cap per client; web.camera_fps overrides
 }
@@ -137,6 +140,7 @@ class Hub:
         sub(topics.SIM_PEOPLE, People, self._on_people)  # published only by the simulator
         sub(topics.HEARD, Text, lambda m: self.caption("visitor", m.data, "microphone"), maxsize=20)
         sub(topics.SAY, Text, lambda m: self.caption("robot", m.data, "announcement"), maxsize=20)
+        sub(topics.TOUR_STATE, TourState, lambda m: self.set("tour", tour_json(m)))  # the visitor's tour
         self.set("estop", {"type": "estop", "engaged": False})
 
     def stop(self) -> None:

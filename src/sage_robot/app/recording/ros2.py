@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from sage_robot.core.geometry import yaw_to_quaternion
+from sage_robot.core.geometry import quaternion_to_yaw, yaw_to_quaternion
 from sage_robot.core.msgs import (
     BatteryState,
     CompressedImage,
@@ -24,6 +24,7 @@ from sage_robot.core.msgs import (
     Odometry,
     Path,
     Pose2D,
+    PoseStamped,
     PoseWithCovariance,
     Twist,
     to_dict,
@@ -173,7 +174,10 @@ def laser_scan(m: LaserScan) -> dict[str, Any]:
     }
 
 
-def occupancy_grid(m: OccupancyGrid) -> dict[str, Any]:
+def occupancy_grid(m: OccupancyGrid, as_array: bool = False) -> dict[str, Any]:
+    """``as_array``: ``data`` as a flat int8 numpy array (the ROS 2 bridge's CDR codec takes it
+    without a copy through a list) instead of a list (MCAP's serializer needs one)."""
+    data = m.data.astype(np.int8).ravel()
     return {
         "header": _header(m.stamp, m.frame_id),
         "info": {
@@ -183,7 +187,7 @@ def occupancy_grid(m: OccupancyGrid) -> dict[str, Any]:
             "height": m.height,
             "origin": _pose(m.origin),
         },
-        "data": m.data.astype(np.int8).ravel().tolist(),
+        "data": data if as_array else data.tolist(),
     }
 
 
@@ -242,6 +246,51 @@ def compressed_image(m: CompressedImage) -> dict[str, Any]:
 
 def twist(m: Twist) -> dict[str, Any]:
     return _twist(m)
+
+
+def pose_stamped(m: PoseStamped) -> dict[str, Any]:
+    return {"header": _header(m.stamp, m.frame_id), "pose": _pose(m.pose)}
+
+
+def pose_tf(m: PoseStamped, child_frame_id: str) -> dict[str, Any]:
+    """A tf2_msgs/TFMessage of one transform: ``m`` is the pose of ``child_frame_id`` in
+    ``m.frame_id`` (e.g. the map → odom correction)."""
+    pose = _pose(m.pose)
+    return {
+        "transforms": [
+            {
+                "header": _header(m.stamp, m.frame_id),
+                "child_frame_id": child_frame_id,
+                "transform": {"translation": pose["position"], "rotation": pose["orientation"]},
+            }
+        ]
+    }
+
+
+# ------------------------------------------------------------------ ROS 2 → SAGE
+
+
+def _finite(*values: Any) -> tuple[float, ...]:
+    out = tuple(float(v) for v in values)
+    if not all(math.isfinite(v) for v in out):
+        raise ValueError(f"non-finite value in {out}")
+    return out
+
+
+def twist_from_ros(d: dict[str, Any]) -> Twist:
+    """geometry_msgs/Twist → SAGE's planar Twist (linear.x, angular.z; the rest is ignored)."""
+    linear_x, angular_z = _finite(d["linear"]["x"], d["angular"]["z"])
+    return Twist(linear_x, angular_z)
+
+
+def pose_stamped_from_ros(d: dict[str, Any]) -> PoseStamped:
+    """geometry_msgs/PoseStamped → SAGE's planar PoseStamped (x, y and the yaw of the quaternion)."""
+    p, q = d["pose"]["position"], d["pose"]["orientation"]
+    x, y = _finite(p["x"], p["y"])
+    qx, qy, qz, qw = _finite(q["x"], q["y"], q["z"], q["w"])
+    stamp = d["header"]["stamp"]
+    t = int(stamp["sec"]) + int(stamp["nanosec"]) * 1e-9
+    return PoseStamped(t, str(d["header"]["frame_id"]), Pose2D(x, y, quaternion_to_yaw((qx, qy, qz, qw))))
 
 
 def as_json_string(m: Any) -> dict[str, Any]:

@@ -131,6 +131,11 @@ class VoiceSettings(Section):
     stt_model: str = Field("tiny.en", description="Whisper model: 'tiny.en' (bundled) or a path.")
     stt_device: str = Field("cpu", description="'cpu' or 'cuda'.")
     stt_compute_type: str = Field("int8", description="CTranslate2 compute type.")
+    stt_min_confidence: float = Field(
+        0.4, ge=0, le=1,
+        description="A transcript less sure than this (exp of its mean token log-probability) "
+        "is not acted on: the robot says it did not catch that.",
+    )
     asr_partial: bool = Field(
         True, description="While listening, re-transcribe the utterance so far for the face."
     )

@@ -21,8 +21,10 @@ from sage_robot.core.config.areas import (
     WebSettings,
 )
 from sage_robot.core.config.base import Section
+from sage_robot.core.config.bus import BusSettings
 from sage_robot.core.config.devices import CameraSettings, LidarSettings
 from sage_robot.core.config.ops import OpsSettings
+from sage_robot.core.config.processes import ProcessSettings
 from sage_robot.core.config.robot import BatterySettings, McuSettings, RobotSettings
 from sage_robot.core.errors import ConfigError
 
@@ -44,6 +46,8 @@ class Settings(Section):
     web: WebSettings = Field(default_factory=WebSettings)
     email: EmailSettings = Field(default_factory=EmailSettings)
     slam: SlamSettings = Field(default_factory=SlamSettings)
+    bus: BusSettings = Field(default_factory=BusSettings)
+    processes: ProcessSettings = Field(default_factory=ProcessSettings)
     secrets_file: str = Field("", description="Key file (KEY=VALUE or JSON), mode 600.")
 
 

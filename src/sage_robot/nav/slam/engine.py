@@ -27,7 +27,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from sage_robot.core.geometry import compose, relative
-from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap
+from sage_robot.nav.slam.dynamic import small_foreground
+from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap, smooth_normals
+from sage_robot.nav.slam.odomcal import OdometryCalibration
 from sage_robot.nav.slam.points import Pose, Scan, normals, rotate, transform, voxel_filter, voxel_indices
 from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, PoseGraph
 
@@ -45,6 +47,10 @@ class SlamConfig:
     keyframe_dist_m: float = 0.3  # a new keyframe after this much travel...
     keyframe_angle_rad: float = 0.2  # ...or this much turning
     local_keyframes: int = 25  # keyframes in the local map
+    # The scan was matched against the whole local map, so its match also ties the new
+    # keyframe to these older keyframes of that map (counted back from the previous one):
+    # an odometry bias cannot bend the chain one small step at a time.
+    submap_edge_strides: tuple[int, ...] = (4, 8, 16, 24)
     search_xy_m: float = 0.25  # correlative search window around the prediction (±)
     search_theta_rad: float = 0.3  # (±): wheel odometry turns badly (MIT CSAIL: 0.1 rad per 0.4 s)
     search_theta_step_rad: float = 0.01
@@ -70,6 +76,17 @@ class SlamConfig:
     loop_max_chi: float = 8.0  # a loop edge's Mahalanobis error after optimising must stay below this
     loop_information_scale: float = 0.5  # a loop edge counts this much of a scan-match edge
     loop_every_keyframes: int = 2  # try a loop closure every this many keyframes
+    calibrate_odometry: bool = True  # learn the odometry's scale and heading drift (odomcal)
+    # > 0: the local map's normals are fitted again on the merged keyframes, to this many
+    # neighbours within map_normal_radius_m (for a noisy lidar; 0: each keyframe's own normals)
+    map_normal_neighbours: int = 0
+    map_normal_radius_m: float = 0.5
+    # > 1: a local-map point needs points of this many keyframes in its map_support_cell_m
+    # cell (walking people's legs are somewhere else in every keyframe: they drop out)
+    map_min_support: int = 1
+    map_support_cell_m: float = 0.15
+    # > 0: returns of foreground objects no wider than this (m: legs) are left out of matching
+    drop_small_objects_m: float = 0.0
     match: MatchConfig = field(default_factory=MatchConfig)
 
 
@@ -83,9 +100,29 @@ class Keyframe:
     normals: np.ndarray | None = None  # of the points, robot frame (computed once)
 
     def point_normals(self) -> np.ndarray:
+        """Unit normals, each turned to face the laser that saw its point (robot frame)."""
         if self.normals is None:
-            self.normals = normals(self.points, cKDTree(self.points)) if len(self.points) else self.points
+            if len(self.points):
+                nrm = normals(self.points, cKDTree(self.points))
+                toward = np.asarray(self.scan.laser[:2]) - self.points
+                self.normals = np.where((np.einsum("ij,ij->i", nrm, toward) < 0)[:, None], -nrm, nrm)
+            else:
+                self.normals = self.points
         return self.normals
+
+
+def _supported(pts: np.ndarray, owner: np.ndarray, cell_m: float, need: int) -> np.ndarray:
+    """Mask of the points whose ``cell_m`` cell holds points of at least ``need`` owners."""
+    if len(pts) == 0:
+        return np.zeros(0, dtype=bool)
+    keys = np.floor(pts / cell_m).astype(np.int64)
+    keys -= keys.min(axis=0)
+    flat = keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1]
+    cells, inverse = np.unique(flat, return_inverse=True)
+    pairs = np.unique(inverse * (int(owner.max()) + 1) + owner)
+    owners_per_cell = np.bincount(pairs // (int(owner.max()) + 1), minlength=len(cells))
+    mask: np.ndarray = owners_per_cell[inverse] >= need
+    return mask
 
 
 @dataclass(frozen=True)
@@ -123,11 +160,12 @@ class Slam:
         self._step_dist = 0.0  # odometry translation since the previous scan (m)
         self._local: PointMap | None = None
         self._since_loop_try = 0
+        self.odometry_calibration = OdometryCalibration()
 
     # ------------------------------------------------------------------ per scan
     def add_scan(self, stamp: float, odom: Pose, scan: Scan) -> StepResult:
         cfg = self.config
-        q = voxel_filter(scan.points(cfg.max_range_m), cfg.scan_voxel_m)
+        q = voxel_filter(self._scan_points(scan), cfg.scan_voxel_m)
         if self._last_odom is None and self.keyframes:  # a resumed session: start at its last keyframe
             self._last_odom = odom
         if self._last_odom is None:
@@ -135,22 +173,25 @@ class Slam:
             self._add_keyframe(stamp, odom, scan, self.initial_pose, None)
             self.trajectory.append(_TrajectoryEntry(stamp, 0, (0.0, 0.0, 0.0)))
             return StepResult(self.pose, 1.0, 1.0, True, False)
-        step = relative(self._last_odom, odom)
+        step = self._odometry_step(self._last_odom, odom)
         predicted = compose(self.pose, step)
         self._last_odom = odom
         self._step_dist = math.hypot(step[0], step[1])
-        match = self._track(q, predicted)
+        view = (scan.laser[0], scan.laser[1])
+        match = self._track(q, predicted, view)
         if self._doubtful(step, match):
             # Odometry glitches (frozen, then a jump) happen: also try "as the last step" and
             # "no motion", and keep the prediction whose match fits best.
             for guess in (compose(self.pose, self._last_step), self.pose):
-                other = self._track(q, guess)
+                other = self._track(q, guess, view)
                 if other is not None and (match is None or other.inliers > match.inliers + GLITCH_MARGIN):
                     match, predicted = other, guess
         if match is None or match.inliers < cfg.min_track_inliers:
             pose, score, inliers = predicted, 0.0, match.inliers if match else 0.0
+            self.odometry_calibration.observe(pose, odom, None)
         else:
             pose, score, inliers = match.pose, match.score, match.inliers
+            self.odometry_calibration.observe(pose, odom, match.information)
         self._last_step = relative(self.pose, pose)
         self.pose, self.last_score = pose, score
         kf = len(self.keyframes) - 1
@@ -165,6 +206,22 @@ class Slam:
         closed = self._try_loop_closure()
         return StepResult(self.pose, score, inliers, True, closed)
 
+    def _scan_points(self, scan: Scan) -> np.ndarray:
+        """Robot-frame end points of the returns used for matching (small foreground left out)."""
+        cfg = self.config
+        if cfg.drop_small_objects_m <= 0:
+            return scan.points(cfg.max_range_m)
+        mask = scan.hits(cfg.max_range_m)
+        mask &= ~small_foreground(scan.ranges, scan.angles, mask, cfg.drop_small_objects_m)
+        r, a = scan.ranges[mask].astype(np.float64), scan.angles[mask]
+        lx, ly, lt = scan.laser
+        return np.column_stack((lx + r * np.cos(a + lt), ly + r * np.sin(a + lt)))
+
+    def _odometry_step(self, a: Pose, b: Pose) -> Pose:
+        """The odometry's motion from ``a`` to ``b``, calibrated when that is on."""
+        step = relative(a, b)
+        return self.odometry_calibration.correct(step) if self.config.calibrate_odometry else step
+
     def _doubtful(self, step: Pose, match: Match | None) -> bool:
         """Is the odometry step or its match suspicious?"""
         cfg = self.config
@@ -173,7 +230,7 @@ class Slam:
         big = math.hypot(step[0], step[1]) > cfg.search_xy_m or abs(step[2]) > 0.5 * cfg.search_theta_rad
         return big or match is None or match.inliers < DOUBTFUL_INLIERS
 
-    def _track(self, q: np.ndarray, predicted: Pose) -> Match | None:
+    def _track(self, q: np.ndarray, predicted: Pose, view: tuple[float, float]) -> Match | None:
         cfg = self.config
         if self._local is None or len(q) < MIN_SCAN_POINTS:
             return None
@@ -187,14 +244,14 @@ class Slam:
             prior_sigma=(SEARCH_PRIOR_SCALE * sxy, SEARCH_PRIOR_SCALE * cfg.prior_sigma_theta_rad),
         )
         prior_info = np.diag([sxy**-2, sxy**-2, cfg.prior_sigma_theta_rad**-2])
-        return self._local.refine(q, init, predicted, prior_info)
+        return self._local.refine(q, init, predicted, prior_info, view)
 
     # ------------------------------------------------------------------ keyframes
     def _add_keyframe(
         self, stamp: float, odom: Pose, scan: Scan, pose: Pose, info: np.ndarray | None
     ) -> None:
         cfg = self.config
-        pts = voxel_filter(scan.points(cfg.max_range_m), cfg.map_voxel_m)
+        pts = voxel_filter(self._scan_points(scan), cfg.map_voxel_m)
         travel = 0.0
         if self.keyframes:
             prev = self.keyframes[-1]
@@ -207,7 +264,11 @@ class Slam:
             z = relative(self.graph.poses[i], pose)
             if info is not None:
                 self.graph.add_edge(i, node, z, info, KIND_SCAN)
-            odo = relative(self.keyframes[i].odom, odom)
+                for back in cfg.submap_edge_strides:  # scan-to-submap: stiffen the chain
+                    if back < min(node, cfg.local_keyframes):
+                        a = node - 1 - back
+                        self.graph.add_edge(a, node, relative(self.graph.poses[a], pose), info, KIND_SCAN)
+            odo = self._odometry_step(self.keyframes[i].odom, odom)
             dist = math.hypot(odo[0], odo[1])
             sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
             sth = cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * abs(odo[2])
@@ -222,17 +283,26 @@ class Slam:
         nrm = np.concatenate(
             [rotate(self.graph.poses[k][2], self.keyframes[k].point_normals()) for k in indices]
         )
+        need = self.config.map_min_support
+        if need > 1 and len(indices) >= need:
+            owner = np.repeat(np.arange(len(indices)), [len(self.keyframes[k].points) for k in indices])
+            seen = _supported(pts, owner, self.config.map_support_cell_m, need)
+            pts, nrm = pts[seen], nrm[seen]
         keep = voxel_indices(pts, self.config.map_voxel_m)
         return pts[keep], nrm[keep]
 
     def _rebuild_local(self) -> None:
+        cfg = self.config
         n = len(self.keyframes)
-        pts, nrm = self._points_of(range(max(0, n - self.config.local_keyframes), n))
-        self._local = (
-            PointMap(pts, self.config.match, self.config.search_xy_m, nrm)
-            if len(pts) >= MIN_SCAN_POINTS
-            else None
-        )
+        pts, nrm = self._points_of(range(max(0, n - cfg.local_keyframes), n))
+        if len(pts) < MIN_SCAN_POINTS:
+            self._local = None
+            return
+        self._local = PointMap(pts, cfg.match, cfg.search_xy_m, nrm, oriented=True)
+        if cfg.map_normal_neighbours > 0:
+            self._local.normals = smooth_normals(
+                pts, self._local.tree, nrm, cfg.map_normal_neighbours, cfg.map_normal_radius_m
+            )
 
     # ------------------------------------------------------------------ loop closure
     def _loop_candidate(self) -> int | None:
@@ -265,7 +335,7 @@ class Slam:
         pts, nrm = self._points_of(members)
         if len(pts) < MIN_SCAN_POINTS:
             return False
-        sub = PointMap(pts, cfg.match, cfg.loop_search_xy_m, nrm)
+        sub = PointMap(pts, cfg.match, cfg.loop_search_xy_m, nrm, oriented=True)
         q = voxel_filter(self.keyframes[k].points, cfg.scan_voxel_m)
         guess = self.graph.poses[k]
         init, score = sub.search(
@@ -278,7 +348,8 @@ class Slam:
         )
         if score < cfg.loop_min_score * 0.8 or sub.last_second_best > cfg.loop_max_ambiguity * score:
             return False
-        match = sub.refine(q, init)
+        laser = self.keyframes[k].scan.laser
+        match = sub.refine(q, init, viewpoint=(laser[0], laser[1]))
         if match.score < cfg.loop_min_score or match.inliers < cfg.loop_min_inliers:
             return False
         z = relative(self.graph.poses[j], match.pose)

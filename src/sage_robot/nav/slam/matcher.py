@@ -8,6 +8,10 @@ the maximum of ``L`` over the ``COARSE`` × ``COARSE`` cells above and to its ri
 score of one coarse offset bounds the scores of every fine offset inside it, so the search
 looks at fine offsets only inside the best coarse ones (branch and bound of depth two, as
 Olson's real-time correlative scan matching and Cartographer do).
+
+With ``oriented`` normals (each pointing toward the sensor that saw its point) ICP pairs a
+scan point only with a map surface that faces the scan's sensor: the two faces of a 20 cm
+wall, one seen through a door on the way in and the other on the way out, are not confused.
 """
 
 from __future__ import annotations
@@ -25,6 +29,29 @@ COARSE = 4  # fine cells per coarse search step
 MAX_LOOKUPS = 3_000_000  # field look-ups per vectorised batch (memory bound)
 MAX_BRANCHES = 12  # coarse candidates refined at most
 MIN_MATCH_POINTS = 10  # fewer scan points than this: no match
+GATE_SIGMAS = 2.5  # association gates widen by this many range-noise sigmas
+
+
+def smooth_normals(pts: np.ndarray, tree: cKDTree, oriented: np.ndarray, k: int, radius_m: float) -> np.ndarray:
+    """Normals of ``pts`` fitted to ``k`` neighbours within ``radius_m`` (a noisy lidar's walls
+    are bands: few neighbours give tilted normals, which ICP takes for features along a bare
+    wall), each turned to the side of the given ``oriented`` normal."""
+    dist, idx = tree.query(pts, k=min(k, len(pts)), distance_upper_bound=radius_m)
+    valid = np.isfinite(dist)
+    idx = np.where(valid, idx, np.arange(len(pts))[:, None])
+    w = valid.astype(np.float64)
+    cnt = np.maximum(w.sum(axis=1), 1.0)
+    nb = pts[idx]
+    mean = (nb * w[:, :, None]).sum(axis=1) / cnt[:, None]
+    d = (nb - mean[:, None, :]) * w[:, :, None]
+    sxx, syy = (d[:, :, 0] ** 2).sum(axis=1), (d[:, :, 1] ** 2).sum(axis=1)
+    sxy = (d[:, :, 0] * d[:, :, 1]).sum(axis=1)
+    angle = 0.5 * np.arctan2(2.0 * sxy, sxx - syy) + np.pi / 2.0
+    out = np.column_stack((np.cos(angle), np.sin(angle)))
+    out[cnt < 3] = oriented[cnt < 3]
+    flip = np.einsum("ij,ij->i", out, oriented) < 0
+    out[flip] *= -1.0
+    return out
 
 
 @dataclass(frozen=True)
@@ -36,6 +63,9 @@ class MatchConfig:
     huber_m: float = 0.03  # residuals beyond this are down-weighted
     inlier_m: float = 0.08  # a scan point this close to the map counts as matched
     point_sigma_m: float = 0.01  # residual noise per point for the match's information
+    # Range noise of the lidar as a fraction of the range (RPLIDAR A1M8: 0.01; 0 = none beyond
+    # point_sigma_m): far points then weigh less and get wider association gates.
+    range_noise_fraction: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -55,8 +85,10 @@ class PointMap:
         config: MatchConfig,
         margin_m: float = 1.0,
         point_normals: np.ndarray | None = None,
+        oriented: bool = False,
     ) -> None:
         self.config = config
+        self.oriented = oriented and point_normals is not None  # normals face their sensors
         self.points = pts
         self.tree = cKDTree(pts)
         self.normals = normals(pts, self.tree) if point_normals is None else point_normals
@@ -189,20 +221,57 @@ class PointMap:
         return best_pose, max(best, 0.0)
 
     # ---------------------------------------------------------------- refinement
+    def _facing(self, pose: np.ndarray | Pose, viewpoint: tuple[float, float], p: np.ndarray,
+                j: np.ndarray) -> np.ndarray:
+        """Mask of map points ``j`` (paired with map-frame scan points ``p``) whose surface faces
+        the sensor at robot-frame ``viewpoint`` when the robot is at ``pose`` (all True unless
+        the normals are oriented)."""
+        if not self.oriented:
+            return np.ones(len(j), dtype=bool)
+        sensor = transform(pose, np.array([viewpoint], dtype=np.float64))[0]
+        facing: np.ndarray = np.einsum("ij,ij->i", self.normals[j], sensor - p) > 0.0
+        return facing
+
+    def _gates(self, q: np.ndarray, viewpoint: tuple[float, float], gate: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per point: association gate (m) and weight (1 = a point with point_sigma_m noise)."""
+        cfg = self.config
+        noise = cfg.range_noise_fraction * np.hypot(q[:, 0] - viewpoint[0], q[:, 1] - viewpoint[1])
+        weight: np.ndarray = cfg.point_sigma_m**2 / (cfg.point_sigma_m**2 + noise**2)
+        return np.hypot(gate, GATE_SIGMAS * noise), weight
+
+    def _associate(
+        self, x: np.ndarray | Pose, q: np.ndarray, viewpoint: tuple[float, float], gate: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Map-frame points, pairing mask, map indices and weights of the scan points ``q``."""
+        p = transform(x, q)
+        if self.config.range_noise_fraction > 0:
+            gates, weight = self._gates(q, viewpoint, gate)
+            dist, j = self.tree.query(p, distance_upper_bound=float(gates.max()))
+            ok = np.isfinite(dist) & (dist < gates)
+        else:
+            dist, j = self.tree.query(p, distance_upper_bound=gate)
+            ok, weight = np.isfinite(dist), np.ones(len(q))
+        ok[ok] = self._facing(x, viewpoint, p[ok], j[ok])
+        return p, ok, j, weight
+
     def refine(
-        self, q: np.ndarray, init: Pose, prior: Pose | None = None, prior_info: np.ndarray | None = None
+        self,
+        q: np.ndarray,
+        init: Pose,
+        prior: Pose | None = None,
+        prior_info: np.ndarray | None = None,
+        viewpoint: tuple[float, float] = (0.0, 0.0),
     ) -> Match:
         """Point-to-line ICP from ``init``; an optional Gaussian ``prior`` keeps directions the
-        map does not constrain (a long corridor) near the prediction."""
+        map does not constrain (a long corridor) near the prediction. ``viewpoint``: the
+        sensor's position in the robot frame (m), for oriented normals."""
         cfg = self.config
         x = np.array(init, dtype=np.float64)
         jac = np.zeros((len(q), 3))
         for gate in cfg.icp_stages_m:
             for _ in range(cfg.icp_iterations):
                 c, s = math.cos(x[2]), math.sin(x[2])
-                p = transform(x, q)
-                dist, j = self.tree.query(p, distance_upper_bound=gate)
-                ok = np.isfinite(dist)
+                p, ok, j, weight = self._associate(x, q, viewpoint, gate)
                 if ok.sum() < MIN_MATCH_POINTS:
                     break
                 n = self.normals[j[ok]]
@@ -215,7 +284,8 @@ class PointMap:
                         n[:, 0] * (-s * qk[:, 0] - c * qk[:, 1]) + n[:, 1] * (c * qk[:, 0] - s * qk[:, 1]),
                     )
                 )
-                w = np.minimum(1.0, cfg.huber_m / np.maximum(np.abs(r), 1e-12))
+                wk = weight[ok]
+                w = np.minimum(1.0, cfg.huber_m / np.sqrt(wk) / np.maximum(np.abs(r), 1e-12)) * wk
                 inv_var = 1.0 / cfg.point_sigma_m**2
                 h = jac.T @ (jac * w[:, None]) * inv_var
                 g = jac.T @ (w * r) * inv_var
@@ -232,14 +302,12 @@ class PointMap:
                 if abs(step[0]) + abs(step[1]) < 1e-5 and abs(step[2]) < 1e-5:
                     break
         pose = (float(x[0]), float(x[1]), float((x[2] + math.pi) % (2 * math.pi) - math.pi))
-        return self._evaluate(q, pose)
+        return self._evaluate(q, pose, viewpoint)
 
-    def _evaluate(self, q: np.ndarray, pose: Pose) -> Match:
+    def _evaluate(self, q: np.ndarray, pose: Pose, viewpoint: tuple[float, float] = (0.0, 0.0)) -> Match:
         cfg = self.config
         c, s = math.cos(pose[2]), math.sin(pose[2])
-        p = transform(pose, q)
-        dist, j = self.tree.query(p, distance_upper_bound=cfg.inlier_m)
-        ok = np.isfinite(dist)
+        _, ok, j, weight = self._associate(pose, q, viewpoint, cfg.inlier_m)
         info = np.zeros((3, 3))
         if ok.sum() >= MIN_MATCH_POINTS:
             n, qk = self.normals[j[ok]], q[ok]
@@ -250,6 +318,6 @@ class PointMap:
                     n[:, 0] * (-s * qk[:, 0] - c * qk[:, 1]) + n[:, 1] * (c * qk[:, 0] - s * qk[:, 1]),
                 )
             )
-            info = (jac.T @ jac) / len(qk) / cfg.point_sigma_m**2
+            info = (jac.T @ (jac * weight[ok][:, None])) / len(qk) / cfg.point_sigma_m**2
         score = self.score(q, pose) if self._field is not None else float(ok.mean())
         return Match(pose, score, float(ok.mean()) if len(q) else 0.0, info)

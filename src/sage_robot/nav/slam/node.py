@@ -3,7 +3,8 @@
 - subscribes ``/scan`` (newest only: a scan that arrives while one is being matched replaces
   the waiting one) and ``/odom`` (the latest pose is paired with each scan);
 - publishes the growing map on ``/map`` (latched) every ``slam.map_period_s`` (1 s) when it
-  changed, and a :class:`SlamProgress` on ``/slam/progress`` (latched) after each scan;
+  changed, and a :class:`SlamProgress` on ``/slam/progress`` (latched) and the map->odom
+  correction on ``/localization/map_odom`` (as localization does) after each scan;
 - offers ``/slam/save`` (:class:`SaveMapRequest` → :class:`SaveMapReply`).
 
 Matching and map building run in a worker thread so the event loop never stalls. The laser
@@ -27,10 +28,11 @@ import numpy as np
 from sage_robot.core import topics
 from sage_robot.core.bus import Topic
 from sage_robot.core.config.areas import SlamSettings
-from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D
+from sage_robot.core.geometry import compose, inverse
+from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D, PoseStamped
 from sage_robot.core.node import Node
 from sage_robot.core.paths import state_dir
-from sage_robot.core.resources import ResourceKey
+from sage_robot.core.resources import ResourceKey, Resources
 from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgress
 from sage_robot.nav.slam.occupancy import OccupancyMapper
@@ -99,6 +101,9 @@ class SlamNode(Node):
                 result = await self.clock.offload(self._process, msg.stamp, odom, scan)
             self.scans += 1
             x, y, th = result.pose
+            # map -> odom, as localization publishes it: pages draw the robot on the growing map.
+            correction = Pose2D(*compose(result.pose, inverse(odom)))
+            self.bus.publish(topics.MAP_ODOM, PoseStamped(msg.stamp, "map", correction))
             self.bus.publish(
                 SLAM_PROGRESS,
                 SlamProgress(
@@ -152,8 +157,7 @@ class SlamNode(Node):
         return save_session(self.slam, out, name, self.mapper.to_grid(self.clock.now()))
 
     def out_dir(self) -> Path:
-        out = self.ctx.resources.get(OUT_DIR_RESOURCE)
-        return Path(out or self.config.out_dir or state_dir() / "maps")
+        return maps_dir(self.ctx.resources, self.config)
 
     def stats(self) -> dict[str, Any]:
         return {
@@ -162,6 +166,13 @@ class SlamNode(Node):
             "loop_closures": self.slam.loop_closures,
             "score": round(self.slam.last_score, 3),
         }
+
+
+def maps_dir(resources: Resources, settings: SlamSettings) -> Path:
+    """Where the slam node saves maps: ``OUT_DIR_RESOURCE``, else ``slam.out_dir``, else
+    ``<state dir>/maps`` (the web server lists and tours the maps found there)."""
+    out = resources.get(OUT_DIR_RESOURCE)
+    return Path(out or settings.out_dir or state_dir() / "maps")
 
 
 def slam_config(settings: SlamSettings) -> SlamConfig:

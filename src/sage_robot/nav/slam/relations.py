@@ -11,13 +11,12 @@ relations. Timestamps are matched to the nearest scan timestamp.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from sage_robot.core.geometry import relative
+from sage_robot.core.geometry import wrap_angles
 from sage_robot.nav.slam.carmen import LogFormatError, open_text
 
 RELATION_FIELDS = 8  # t1 t2 x y z roll pitch yaw
@@ -93,26 +92,49 @@ def match_stamps(stamps: np.ndarray, query: np.ndarray, tolerance_s: float = MAT
     return idx
 
 
-def relation_error(
-    stamps: np.ndarray, poses: np.ndarray, relations: list[Relation], tolerance_s: float = MATCH_TOLERANCE_S
-) -> RelationError:
-    """Mean ± std of the translational (m) and rotational (deg) relation errors.
-
-    ``stamps`` (sorted, s) and ``poses`` (N, 3: x, y m; theta rad) are the estimated trajectory.
-    """
+def relation_indices(
+    stamps: np.ndarray, relations: list[Relation], tolerance_s: float = MATCH_TOLERANCE_S
+) -> tuple[np.ndarray, np.ndarray]:
+    """Indices into the sorted ``stamps`` of each relation's first and second pose."""
     stamps = np.asarray(stamps, dtype=np.float64)
     i = match_stamps(stamps, np.array([r.t1 for r in relations]), tolerance_s)
     j = match_stamps(stamps, np.array([r.t2 for r in relations]), tolerance_s)
-    trans = np.empty(len(relations))
-    rot = np.empty(len(relations))
-    for k, rel in enumerate(relations):
-        est = relative(tuple(poses[i[k]]), tuple(poses[j[k]]))
-        err = relative((rel.dx, rel.dy, rel.dtheta), est)
-        trans[k] = math.hypot(err[0], err[1])
-        rot[k] = abs(err[2])
+    return i, j
+
+
+def relative_poses(poses: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """(N, 3) relative poses ⊖x_i ⊕ x_j of ``poses`` (x, y m; θ rad): (dx, dy) in x_i's frame."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    a, b = poses[i], poses[j]
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    d = b[:, :2] - a[:, :2]
+    return np.column_stack(
+        (c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], wrap_angles(b[:, 2] - a[:, 2]))
+    )
+
+
+def reference_array(relations: list[Relation]) -> np.ndarray:
+    """(N, 3) reference relative poses (dx, dy m; dθ rad)."""
+    return np.array([(r.dx, r.dy, r.dtheta) for r in relations], dtype=np.float64).reshape(-1, 3)
+
+
+def error_parts(reference: np.ndarray, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per relation |ε_xy| (m) and |ε_θ| (rad) of ε = ⊖δ* ⊕ δ; both (N, 3) relative poses."""
+    reference = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    estimate = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
+    # ⊖δ* ⊕ δ: the translation difference turned into δ*'s frame keeps its length
+    trans = np.hypot(estimate[:, 0] - reference[:, 0], estimate[:, 1] - reference[:, 1])
+    rot = np.abs(wrap_angles(estimate[:, 2] - reference[:, 2]))
+    return trans, rot
+
+
+def summarize(trans: np.ndarray, rot: np.ndarray) -> RelationError:
+    """Mean ± std of per-relation errors (m, rad) as a :class:`RelationError` (rotation in deg)."""
+    if len(trans) == 0:
+        return RelationError(0, 0.0, 0.0, 0.0, 0.0, 0.0)
     rot_deg = np.degrees(rot)
     return RelationError(
-        len(relations),
+        len(trans),
         float(trans.mean()),
         float(trans.std()),
         float(rot_deg.mean()),
@@ -120,3 +142,14 @@ def relation_error(
         float(trans.max()),
         float(np.median(trans)),
     )
+
+
+def relation_error(
+    stamps: np.ndarray, poses: np.ndarray, relations: list[Relation], tolerance_s: float = MATCH_TOLERANCE_S
+) -> RelationError:
+    """Mean ± std of the translational (m) and rotational (deg) relation errors.
+
+    ``stamps`` (sorted, s) and ``poses`` (N, 3: x, y m; theta rad) are the estimated trajectory.
+    """
+    i, j = relation_indices(stamps, relations, tolerance_s)
+    return summarize(*error_parts(reference_array(relations), relative_poses(poses, i, j)))

@@ -3,17 +3,21 @@
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from sage_robot.nav.slam.carmen import CarmenLog, LogScan, read_log
 from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.points import Scan
+from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, PoseGraph
 
 RANGE_MIN_M = 0.05  # readings closer than this are noise
+REPORT_DIGITS = 4  # decimals of the quality report's residuals
 
 
 @dataclass
@@ -90,3 +94,74 @@ def noisy_odometry(
         dth += rng.normal(0.0, rot * abs(dth) + 0.2 * frac * dist + 1e-4)
         out.append(compose(out[-1], (dx, dy, dth)))
     return out
+
+
+def edge_residuals(graph: PoseGraph) -> tuple[np.ndarray, np.ndarray]:
+    """Per edge, at the current poses: |translation| (m) and |rotation| (rad) of
+    ``⊖z ⊕ (⊖x_i ⊕ x_j)``, the part of the measured relative pose the graph does not honour."""
+    from sage_robot.core.geometry import relative
+
+    trans, rot = [], []
+    for e in graph.edges:
+        dx, dy, dth = relative(e.z, relative(graph.poses[e.i], graph.poses[e.j]))
+        trans.append(math.hypot(dx, dy))
+        rot.append(abs(dth))
+    return np.asarray(trans), np.asarray(rot)
+
+
+def _stats(values: np.ndarray, scale: float = 1.0) -> dict[str, float]:
+    if values.size == 0:
+        return {"mean": 0.0, "max": 0.0}
+    return {"mean": round(float(values.mean()) * scale, REPORT_DIGITS),
+            "max": round(float(values.max()) * scale, REPORT_DIGITS)}  # fmt: skip
+
+
+def quality_report(slam: Slam) -> dict[str, Any]:
+    """How good the optimised pose graph is: keyframes, distance driven, loop closures (accepted,
+    tried, rejected) and, per edge kind (odom / scan / loop), the count, the Mahalanobis error
+    (``chi``) and the metric residuals (``residual_m``, ``residual_deg``: mean and max)."""
+    graph = slam.graph
+    chi = graph.edge_errors()
+    trans, rot = edge_residuals(graph)
+    kinds = np.array([e.kind for e in graph.edges])
+    _, poses = slam.trajectory_array()
+    distance = float(np.hypot(*np.diff(poses[:, :2], axis=0).T).sum()) if len(poses) > 1 else 0.0
+    edges = {}
+    for kind in (KIND_ODOM, KIND_SCAN, KIND_LOOP):
+        sel = kinds == kind
+        edges[kind] = {
+            "count": int(sel.sum()),
+            "chi": _stats(chi[sel]),
+            "residual_m": _stats(trans[sel]),
+            "residual_deg": _stats(rot[sel], math.degrees(1.0)),
+        }
+    return {
+        "keyframes": len(slam.keyframes),
+        "distance_m": round(distance, 2),
+        "loop_closures": slam.loop_closures,
+        "loop_attempts": slam.loop_attempts,
+        "loops_rejected": slam.loops_rejected,
+        "optimizations": slam.optimizations,
+        "edges": edges,
+    }
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """The quality report in a few lines for a person."""
+    lines = [
+        f"quality: {report['keyframes']} keyframes over {report['distance_m']} m, "
+        f"{report['loop_closures']} loops closed ({report['loop_attempts']} tried, "
+        f"{report['loops_rejected']} rejected by the optimised graph), "
+        f"{report['optimizations']} optimisations",
+        "  residuals of the optimised graph (mean / max):",
+    ]
+    for kind, e in report["edges"].items():
+        if not e["count"]:
+            lines.append(f"    {kind:<5} edges: none")
+            continue
+        lines.append(
+            f"    {kind:<5} edges: {e['count']:>5}  {e['residual_m']['mean'] * 100:.2f} / "
+            f"{e['residual_m']['max'] * 100:.2f} cm  {e['residual_deg']['mean']:.3f} / "
+            f"{e['residual_deg']['max']:.3f} deg  chi {e['chi']['mean']:.2f} / {e['chi']['max']:.2f}"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,168 @@
+"""One process group: some of a mode's nodes in a process of their own, on the Zenoh bus.
+
+The process-group supervisor (:mod:`sage_robot.app.process_groups`) starts one of these per
+group of the profile's ``processes.groups``::
+
+    python -m sage_robot.app.group_main --group nav --mode sim --nodes map_server,navigator \\
+        --connect tcp/127.0.0.1:7447 --clock follow
+
+Its bus is a Zenoh client of the supervisor's router (``--connect``). ``--clock source`` (the
+simulator's group) steps a simulated clock and publishes ``/clock``; ``--clock follow`` takes
+time from ``/clock`` (:class:`~sage_robot.core.clock_follow.FollowerClock`); ``--clock wall``
+is the real robot's time. The group's launcher reports on ``/sage/group_health/<group>``;
+the supervisor merges the reports into ``/sage/health``.
+
+In the simulator the MCU's pseudo-terminal lives in the simulator's process: that group keeps
+a link to it at ``--export-port`` (moved when the simulator restarts) and the motion group's
+serial bridge opens the link (``--mcu-port``).
+
+This module imports what its group's nodes need and nothing more: the motion group stays
+small (no ML packages; ``tests/app/test_process_groups.py`` checks it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+from sage_robot.app.launcher import HEALTH_TOPIC, Launcher, NodeSpec
+from sage_robot.app.runtime import make_transport, run_launcher, specs_for
+from sage_robot.core.bus import Bus, Topic
+from sage_robot.core.clock import Clock, SimClock, WallClock
+from sage_robot.core.clock_follow import FollowerClock, publish_clock
+from sage_robot.core.config import Settings, load_profile
+from sage_robot.core.errors import SageError
+from sage_robot.core.msgs import HealthReport
+from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
+from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
+
+GROUP_HEALTH_PREFIX = "/sage/group_health/"  # + group name: a group's launcher reports here
+PORT_WATCH_S = 0.1  # how often the simulator's group checks its pty link (s, its clock)
+CLOCK_MODES = ("source", "follow", "wall")
+
+
+def group_health_topic(group: str) -> Topic[HealthReport]:
+    return Topic(f"{GROUP_HEALTH_PREFIX}{group}", HealthReport)
+
+
+def group_settings(profile: str | None, overrides: dict[str, Any], connect: str) -> Settings:
+    """The profile with ``overrides`` and the bus as a Zenoh client of ``connect``."""
+    bus = {"transport": "zenoh", "zenoh": {"mode": "client", "listen": [], "connect": [connect]}}
+    merged = dict(overrides)
+    merged["bus"] = {**merged.get("bus", {}), **bus}
+    return load_profile(profile, merged)
+
+
+def group_specs(mode: str, nodes: list[str]) -> list[NodeSpec]:
+    """The specs of ``nodes`` as ``mode``'s profile has them (nodes it lacks: not critical)."""
+    base = {s.name: s for s in specs_for(mode)}
+    extra = [n for n in nodes if n not in base]
+    base.update({s.name: s for s in specs_for(mode, extra)[len(base):]})
+    return [base[n] for n in nodes]
+
+
+def make_clock(mode: str, start: float) -> Clock:
+    if mode == "source":
+        return SimClock(start)
+    if mode == "follow":
+        return FollowerClock(start)
+    return WallClock()
+
+
+async def keep_port_link(ctx: NodeContext, link: Path) -> None:
+    """Keep ``link`` pointing at the simulated MCU's pty (the simulator's group)."""
+    current = ""
+    while True:
+        target = ctx.resources.get(PORT_RESOURCE) or ""
+        if target and target != current:
+            tmp = link.with_name(link.name + ".new")
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+            os.symlink(target, tmp)
+            os.replace(tmp, link)
+            current = target
+        await ctx.clock.sleep(PORT_WATCH_S)
+
+
+async def run_group(ctx: NodeContext, specs: list[NodeSpec], export_port: str = "") -> Launcher:
+    """Run the group's nodes until a signal; the simulator's group also publishes ``/clock``."""
+    clock = ctx.clock
+    if isinstance(clock, FollowerClock):
+        return await _run_following(ctx, specs, clock)
+    tasks: list[Any] = []
+
+    async def after_start(_launcher: Launcher) -> None:
+        if isinstance(clock, SimClock):
+            tasks.append(publish_clock(ctx.bus, clock))
+        if export_port:
+            tasks.append(asyncio.get_running_loop().create_task(keep_port_link(ctx, Path(export_port))))
+
+    try:
+        return await run_launcher(ctx, specs, after_start=after_start)
+    finally:
+        for task in tasks:
+            task.cancel()
+
+
+async def _run_following(ctx: NodeContext, specs: list[NodeSpec], clock: FollowerClock) -> Launcher:
+    sub = clock.attach(ctx.bus)
+    launcher = Launcher(ctx, specs)
+    launcher.install_signal_handlers()
+    try:
+        await launcher.start()
+        await launcher._stop_event.wait()
+        await launcher.stop()
+    finally:
+        sub.close()
+        ctx.bus.transport.close()
+    return launcher
+
+
+def build_context(args: argparse.Namespace) -> tuple[NodeContext, list[NodeSpec]]:
+    overrides = json.loads(args.overrides) if args.overrides else {}
+    settings = group_settings(args.profile, overrides, args.connect)
+    specs = group_specs(args.mode, [n for n in args.nodes.split(",") if n])
+    clock = make_clock(args.clock, args.start_time)
+    ctx = NodeContext(Bus(clock, make_transport(settings)), clock, settings)
+    ctx.resources[SIM_STEP_HOOKS] = []
+    ctx.resources[HEALTH_TOPIC] = group_health_topic(args.group)
+    if args.mcu_port:
+        ctx.resources[PORT_RESOURCE] = args.mcu_port
+    return ctx, specs
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(prog="python -m sage_robot.app.group_main",
+                                description=(__doc__ or "").splitlines()[0])
+    p.add_argument("--group", required=True, help="the group's name (processes.groups)")
+    p.add_argument("--mode", required=True, help="the profile's mode (sim, tour, slam, sim_slam)")
+    p.add_argument("--nodes", required=True, help="the group's nodes, comma-separated")
+    p.add_argument("--connect", required=True, help="the supervisor's Zenoh router endpoint")
+    p.add_argument("--profile", help="the profile YAML (default: the shipped simulated robot)")
+    p.add_argument("--overrides", default="", help="settings overrides as a JSON object")
+    p.add_argument("--clock", default="wall", choices=CLOCK_MODES)
+    p.add_argument("--start-time", type=float, default=0.0, help="simulated start time (s)")
+    p.add_argument("--export-port", default="", help="keep a link to the simulated MCU's pty here")
+    p.add_argument("--mcu-port", default="", help="the serial bridge opens this port")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        ctx, specs = build_context(args)
+        asyncio.run(run_group(ctx, specs, args.export_port))
+    except (SageError, json.JSONDecodeError) as exc:
+        print(f"sage group {args.group}: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

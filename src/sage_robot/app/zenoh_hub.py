@@ -1,0 +1,70 @@
+"""The process groups' meeting point: a Zenoh router in the supervisor's process.
+
+Every group's bus is a Zenoh client of this router (explicit loopback endpoint, no
+scouting), so the groups reach each other, and tools (``sage topic``, ``sage status``) reach
+the robot, at one address. The supervisor uses the same session for the few topics it reads
+(each group's health, ``/clock``) and writes (the merged ``/sage/health``, a stop on
+``/cmd_vel`` when a critical group dies), with the bus's wire encoding.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from sage_robot.core.errors import SageError
+from sage_robot.core.transport import wire
+from sage_robot.core.transport.keys import open_session, topic_key
+
+_log = logging.getLogger("sage.process_groups.hub")
+
+
+class ZenohHub:
+    """A Zenoh router listening on ``endpoint``; subscribe and publish bus messages on it."""
+
+    def __init__(self, endpoint: str, robot_id: str = "sage") -> None:
+        import zenoh
+
+        self.endpoint, self.robot = endpoint, robot_id
+        cfg = zenoh.Config()
+        try:
+            cfg.insert_json5("mode", json.dumps("router"))
+            cfg.insert_json5("scouting/multicast/enabled", "false")
+            cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
+            cfg.insert_json5("connect/endpoints", "[]")
+        except zenoh.ZError as exc:
+            raise SageError(f"process groups: bad endpoint {endpoint!r}: {exc}") from None
+        self.session = open_session(cfg, "process groups")
+        self._declared: list[Any] = []
+        self.rejected = 0  # frames that did not decode
+
+    def subscribe(self, topic: str, callback: Callable[[Any], None]) -> None:
+        """Call ``callback(msg)`` on the running event loop for each message on ``topic``."""
+        loop = asyncio.get_running_loop()
+
+        def on_sample(sample: Any) -> None:  # Zenoh's thread
+            try:
+                msg = wire.decode(sample.payload.to_bytes())
+            except wire.WireError as exc:
+                self.rejected += 1
+                _log.warning("bad frame on %s dropped: %s", topic, exc)
+                return
+            with contextlib.suppress(RuntimeError):  # the loop closed: shutting down
+                loop.call_soon_threadsafe(callback, msg)
+
+        self._declared.append(self.session.declare_subscriber(topic_key(self.robot, topic), on_sample))
+
+    def publish(self, topic: str, msg: Any) -> None:
+        self.session.put(topic_key(self.robot, topic), wire.encode(msg))
+
+    def close(self) -> None:
+        for decl in self._declared:
+            with contextlib.suppress(Exception):
+                decl.undeclare()
+        self._declared.clear()
+        with contextlib.suppress(Exception):
+            self.session.close()

@@ -1,0 +1,71 @@
+"""Process groups: which nodes share an operating-system process (``sage sim --processes``).
+
+Each group runs as its own process under one supervisor (``sage_robot.app.process_groups``)
+that restarts a crashed group with backoff; the groups talk over Zenoh on loopback. A group
+lists node names; nodes a mode does not run are ignored, so one grouping serves every mode.
+A node may be in one group only (checked here); that every node of a mode is in some group
+is checked when the mode's groups are planned (the registry knows the nodes, core does not).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+
+from pydantic import Field, field_validator
+
+from sage_robot.core.config.base import Section
+from sage_robot.core.errors import ConfigError
+
+GROUP_NAME = re.compile(r"^[a-z][a-z0-9_]{0,31}$")  # a group name: also a topic-name chunk
+CLOCK_GROUP = "sim"  # the group whose simulated clock the others follow (it publishes /clock)
+
+# The default split: the motion process is small (no ML imports) and restarts fast; what
+# shares in-process objects stays together (the world and the firmware model; the KB service
+# and the brain that asks it).
+DEFAULT_GROUPS: dict[str, tuple[str, ...]] = {
+    "sim": ("sim_world", "mcu_sim"),
+    "motion": ("serial_bridge", "battery_watchdog", "heartbeat"),
+    "sensors": ("lidar", "camera"),
+    "nav": ("map_server", "localization", "navigator", "slam"),
+    "voice": ("voice",),
+    "brain": ("kb", "brain", "tour"),
+    "web": ("web", "foxglove", "ros2_bridge", "recorder", "replay"),
+}
+
+
+class ProcessSettings(Section):
+    groups: dict[str, tuple[str, ...]] = Field(
+        default_factory=lambda: dict(DEFAULT_GROUPS),
+        description="Group name -> the nodes that run in that process. A group named "
+        f"'{CLOCK_GROUP}' runs the simulator and publishes /clock; the others follow it.",
+    )
+
+    @field_validator("groups")
+    @classmethod
+    def _one_group_per_node(cls, groups: dict[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
+        owner: dict[str, str] = {}
+        for group, nodes in groups.items():
+            if not GROUP_NAME.match(group):
+                raise ValueError(f"group name {group!r}: lower-case letters, digits and '_'")
+            for node in nodes:
+                if node in owner:
+                    raise ValueError(f"node {node!r} is in two groups: {owner[node]!r} and {group!r}")
+                owner[node] = group
+        return groups
+
+
+def group_of(groups: Mapping[str, tuple[str, ...]], nodes: list[str]) -> dict[str, list[str]]:
+    """The groups that run ``nodes`` (in their order; empty groups left out), or a one-line
+    error naming the first node that is in no group."""
+    owner = {node: group for group, members in groups.items() for node in members}
+    out: dict[str, list[str]] = {}
+    for node in nodes:
+        group = owner.get(node)
+        if group is None:
+            raise ConfigError(
+                f"node {node!r} is in no process group; add it to processes.groups in the "
+                f"profile (groups: {', '.join(groups)})"
+            )
+        out.setdefault(group, []).append(node)
+    return out

@@ -1,0 +1,195 @@
+"""The bus over Zenoh: :class:`ZenohTransport`.
+
+Inside the process nothing changes: the bus hands local subscribers the object itself. Each
+publication is also put on ``sage/<robot>/topic/<name>`` — encoded (:mod:`.wire`) only while
+some other process subscribes to it, so an unwatched camera costs nothing. Remote
+publications arrive on Zenoh's thread, are decoded there and handed to the bus, which
+delivers them on its loop. Publishers send only to remote subscribers and the subscriber
+takes only remote samples (Zenoh's locality), so a process never hears itself.
+
+Queryables answer tools without a subscription: ``info/<zid>`` (topics, types, counts),
+``last/<name>`` (the last message published here) and ``pub/<name>`` (an operator's
+publication, checked against the operator password; `sage topic pub`).
+"""
+
+from __future__ import annotations
+
+import hmac
+import json
+import logging
+import os
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from sage_robot.core.bus import Transport
+from sage_robot.core.config.bus import BusSettings
+from sage_robot.core.transport import wire
+from sage_robot.core.transport.keys import (
+    TOPIC_NAME,
+    kind_key,
+    open_session,
+    session_config,
+    topic_key,
+    topic_of,
+)
+
+_log = logging.getLogger("sage.bus.zenoh")
+
+OperatorCheck = Callable[[str], bool]  # the operator password is right
+
+
+class ZenohTransport(Transport):
+    """Publications go to Zenoh as well; other processes' come back to the bus."""
+
+    def __init__(self, settings: BusSettings, operator_password: Callable[[], str] | None = None) -> None:
+        self.robot = settings.robot_id
+        z = settings.zenoh
+        self.session = open_session(session_config(z, list(z.listen), list(z.connect)), "bus")
+        self.zid = str(self.session.zid())
+        self._operator_password = operator_password
+        self._deliver: Callable[[str, Any], None] | None = None
+        self._publishers: dict[str, Any] = {}
+        self._matched: dict[str, bool] = {}
+        self._local_only: set[str] = set()  # topics whose messages cannot be encoded
+        self._last: dict[str, Any] = {}
+        self._counts: dict[str, int] = {}
+        self._declared: list[Any] = []
+        self._lock = threading.Lock()  # declarations vs close
+        self.sent = 0
+        self.received = 0
+        self.rejected = 0  # frames that did not decode, refused publications
+        self.closed = False
+
+    # ------------------------------------------------------------ Transport
+    def attach(self, deliver: Callable[[str, Any], None]) -> None:
+        self._deliver = deliver
+        remote = zenoh.Locality.REMOTE
+        s = self.session
+        self._declared += [
+            s.declare_subscriber(kind_key(self.robot, "topic"), self._on_sample, allowed_origin=remote),
+            s.declare_queryable(kind_key(self.robot, "info", self.zid), self._on_info, allowed_origin=remote),
+            s.declare_queryable(kind_key(self.robot, "last"), self._on_last, allowed_origin=remote),
+            s.declare_queryable(kind_key(self.robot, "pub"), self._on_pub, allowed_origin=remote),
+        ]
+
+    def send(self, topic: str, msg: Any) -> None:
+        if self.closed or topic in self._local_only:
+            return
+        self._last[topic] = msg
+        self._counts[topic] = self._counts.get(topic, 0) + 1
+        pub = self._publishers.get(topic)
+        if pub is None:
+            pub = self._declare_publisher(topic)
+            if pub is None:
+                return
+        if not self._matched.get(topic):
+            return
+        try:
+            frame = wire.encode(msg)
+        except TypeError as exc:
+            self._local_only.add(topic)
+            _log.warning("topic %s stays in this process: %s", topic, exc)
+            return
+        pub.put(frame)
+        self.sent += 1
+
+    def matched(self, topic: str) -> bool:
+        """Whether another process subscribes to ``topic`` (known once it was published here)."""
+        return bool(self._matched.get(topic))
+
+    def close(self) -> None:
+        with self._lock:
+            if self.closed:
+                return
+            self.closed = True
+        for decl in [*self._declared, *self._publishers.values()]:
+            decl.undeclare()
+        self._declared.clear()
+        self._publishers.clear()
+        self.session.close()
+
+    # ------------------------------------------------------------ publishing
+    def _declare_publisher(self, topic: str) -> Any:
+        if not TOPIC_NAME.match(topic):
+            self._local_only.add(topic)
+            _log.warning("topic %r stays in this process: not a name Zenoh can carry", topic)
+            return None
+        with self._lock:
+            if self.closed:
+                return None
+            pub = self.session.declare_publisher(
+                topic_key(self.robot, topic), express=True, allowed_destination=zenoh.Locality.REMOTE
+            )
+            self._matched[topic] = pub.matching_status.matching
+
+            def on_match(status: Any) -> None:
+                self._matched[topic] = status.matching
+
+            self._declared.append(pub.declare_matching_listener(on_match))
+            self._publishers[topic] = pub
+        return pub
+
+    # ------------------------------------------------------------ from Zenoh's threads
+    def _on_sample(self, sample: Any) -> None:
+        topic = topic_of(self.robot, "topic", str(sample.key_expr))
+        if topic is None or self._deliver is None:
+            return
+        try:
+            msg = wire.decode(sample.payload.to_bytes())
+        except wire.WireError as exc:
+            self.rejected += 1
+            _log.warning("bad frame on %s dropped: %s", topic, exc)
+            return
+        self.received += 1
+        self._deliver(topic, msg)
+
+    def _on_info(self, query: Any) -> None:
+        counts = dict(self._counts)
+        types = {t: type(m).__name__ for t, m in list(self._last.items())}
+        topics = {t: {"type": types.get(t, "?"), "published": n} for t, n in sorted(counts.items())}
+        body = {"zid": self.zid, "pid": os.getpid(), "robot": self.robot, "topics": topics}
+        query.reply(kind_key(self.robot, "info", self.zid), json.dumps(body))
+
+    def _on_last(self, query: Any) -> None:
+        wanted = query.key_expr
+        for topic, msg in list(self._last.items()):
+            key = kind_key(self.robot, "last", topic[1:])
+            if topic not in self._local_only and wanted.intersects(zenoh.KeyExpr(key)):
+                query.reply(key, wire.encode(msg))
+
+    def _on_pub(self, query: Any) -> None:
+        topic = topic_of(self.robot, "pub", str(query.key_expr))
+        refusal = self._check_pub(query, topic)
+        if refusal:
+            self.rejected += 1
+            query.reply_err(refusal)
+            return
+        try:
+            msg = wire.decode(query.payload.to_bytes())
+        except wire.WireError as exc:
+            self.rejected += 1
+            query.reply_err(f"bad message: {exc}")
+            return
+        if topic is None or self._deliver is None:  # _check_pub refused both already
+            return
+        self._deliver(topic, msg)
+        self._last[topic] = msg
+        query.reply(str(query.key_expr), json.dumps({"published": topic, "type": type(msg).__name__}))
+
+    def _check_pub(self, query: Any, topic: str | None) -> str:
+        """Why an operator publication is refused ('' when it is not)."""
+        if topic is None:
+            return "bad topic name"
+        if self._operator_password is None or self._deliver is None:
+            return "this robot takes no publications from tools"
+        given = query.attachment.to_bytes() if query.attachment is not None else b""
+        expected = self._operator_password().encode("utf-8")
+        if not hmac.compare_digest(given, expected):
+            _log.warning("publication on %s refused: wrong operator password", topic)
+            return "wrong operator password"
+        if query.payload is None:
+            return "no message"
+        return ""

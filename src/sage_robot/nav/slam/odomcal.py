@@ -1,0 +1,104 @@
+"""Online wheel-odometry calibration: the scale and heading drift the scan matcher measures.
+
+Along a long bare corridor the scans say nothing about the position along it, so SLAM can
+only follow the odometry there: a wheel that reads 2 % long puts the robot 24 cm off after
+12 m. The same odometry, compared with the scan matcher where the scans *do* pin the pose
+down (a room, a junction, a door frame), shows its error: this class keeps, from such
+stretches, the odometry's scale (matched distance / odometry distance) and its heading drift
+per metre, both as decaying weighted means, and corrects odometry steps with them.
+
+A stretch counts when both of its ends were matched with the information along the direction
+of travel at least ``MIN_ISOTROPY`` of the strongest direction's, and it is at least
+``BASELINE_M`` long (the matcher's centimetre noise then weighs little). Poses (x, y m;
+theta rad).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sage_robot.core.geometry import relative
+
+Pose = tuple[float, float, float]
+
+BASELINE_M = 2.0  # a calibration stretch is at least this long (m of odometry)
+MAX_STRETCH_TURN_RAD = 0.3  # ...and turns less than this (a turn's own scale error stays out)
+MIN_ISOTROPY = 0.25  # information along the travel / strongest direction, at both ends
+MEMORY_M = 200.0  # older stretches fade out over about this many metres
+SCALE_LIMITS = (0.8, 1.2)  # a scale outside this is not believed
+MAX_YAW_DRIFT_RAD_PER_M = 0.05
+MIN_CALIBRATED_M = 4.0  # corrections apply once this much odometry has been compared
+
+
+@dataclass
+class _Anchor:
+    pose: Pose  # matched
+    odom: Pose
+
+
+class OdometryCalibration:
+    def __init__(self) -> None:
+        self.scale = 1.0
+        self.yaw_per_m = 0.0
+        self._sum_est = 0.0  # decaying sums of matched and odometry distances (m)
+        self._sum_odom = 0.0
+        self._sum_yaw = 0.0  # decaying sum of heading differences (rad)
+        self._anchor: _Anchor | None = None
+
+    @property
+    def calibrated(self) -> bool:
+        return self._sum_odom >= MIN_CALIBRATED_M
+
+    def correct(self, step: Pose) -> Pose:
+        """An odometry increment (robot frame) with the calibration applied."""
+        if not self.calibrated:
+            return step
+        dist = math.hypot(step[0], step[1])
+        return (self.scale * step[0], self.scale * step[1], step[2] - self.yaw_per_m * dist)
+
+    def observe(self, pose: Pose, odom: Pose, information: np.ndarray | None) -> None:
+        """Feed one matched scan: its pose, the raw odometry pose and the match's information
+        (None: not matched, which ends the current stretch)."""
+        if information is None:
+            self._anchor = None
+            return
+        if not self._pinned(pose, information):
+            return
+        if self._anchor is None:
+            self._anchor = _Anchor(pose, odom)
+            return
+        d_odom = relative(self._anchor.odom, odom)
+        dist = math.hypot(d_odom[0], d_odom[1])
+        if dist < BASELINE_M:
+            return
+        d_est = relative(self._anchor.pose, pose)
+        self._anchor = _Anchor(pose, odom)
+        if abs(d_odom[2]) > MAX_STRETCH_TURN_RAD:
+            return
+        keep = math.exp(-dist / MEMORY_M)
+        self._sum_est = keep * self._sum_est + math.hypot(d_est[0], d_est[1])
+        self._sum_odom = keep * self._sum_odom + dist
+        self._sum_yaw = keep * self._sum_yaw + math.remainder(d_odom[2] - d_est[2], 2 * math.pi)
+        scale = self._sum_est / self._sum_odom
+        self.scale = min(max(scale, SCALE_LIMITS[0]), SCALE_LIMITS[1])
+        yaw = self._sum_yaw / self._sum_odom
+        self.yaw_per_m = min(max(yaw, -MAX_YAW_DRIFT_RAD_PER_M), MAX_YAW_DRIFT_RAD_PER_M)
+
+    def _pinned(self, pose: Pose, information: np.ndarray) -> bool:
+        """Does the match pin the pose down along the direction of travel (map frame)? At the
+        start of a stretch: along every direction."""
+        info = information[:2, :2]
+        vals = np.linalg.eigvalsh(info)
+        if vals[-1] <= 0:
+            return False
+        if self._anchor is None:
+            return bool(vals[0] >= MIN_ISOTROPY * vals[-1])
+        d = np.array([pose[0] - self._anchor.pose[0], pose[1] - self._anchor.pose[1]])
+        norm = float(np.hypot(d[0], d[1]))
+        if norm < 1e-6:
+            return bool(vals[0] >= MIN_ISOTROPY * vals[-1])
+        u = d / norm
+        return bool(u @ info @ u >= MIN_ISOTROPY * vals[-1])
