@@ -79,6 +79,13 @@ async def _tour_message(ws: Any, phase: str) -> dict[str, Any]:
             return msg
 
 
+async def _until_estop(ws: Any, engaged: bool) -> None:
+    while True:
+        msg = json.loads(await asyncio.wait_for(ws.recv(), WAIT_S))
+        if msg.get("type") == "estop" and msg["engaged"] is engaged:
+            return
+
+
 async def test_tour_state_and_commands_on_the_pages(pages: Pages) -> None:
     ws_url = pages.url.replace("http://", "ws://") + "/ws/status"
     async with httpx.AsyncClient(base_url=pages.url, timeout=WAIT_S) as visitor, \
@@ -115,6 +122,17 @@ async def test_tour_state_and_commands_on_the_pages(pages: Pages) -> None:
         unknown = await _post(op, "/api/tour/teleport")
         assert unknown.status_code == 404
         assert "commands: pause, resume, skip, stop" in unknown.json()["error"]
+
+        cookie = f"sage_session={login.cookies['sage_session']}"
+        async with connect(pages.url.replace("http://", "ws://") + "/ws/teleop", origin=Origin(pages.url),
+                           additional_headers={"Cookie": cookie}, open_timeout=WAIT_S) as teleop:  # fmt: skip
+            await teleop.send(json.dumps({"type": "estop", "engaged": True}))
+            await _until_estop(teleop, engaged=True)
+            refused = await _post(op, "/api/tour/resume")
+            assert refused.status_code == 409
+            assert refused.json() == {"error": "e-stop is engaged: release it first"}
+            await teleop.send(json.dumps({"type": "estop", "engaged": False}))
+            await _until_estop(teleop, engaged=False)
 
         skipped = await _post(op, "/api/tour/skip")
         assert skipped.status_code == 200

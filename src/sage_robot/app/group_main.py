@@ -32,12 +32,14 @@ from pathlib import Path
 from typing import Any
 
 from sage_robot.app.launcher import HEALTH_TOPIC, Launcher, NodeSpec
-from sage_robot.app.runtime import make_transport, run_launcher, specs_for
+from sage_robot.app.profiles import PROFILES
+from sage_robot.app.registry import node_class
+from sage_robot.app.runtime import make_transport, run_launcher
 from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.clock import Clock, SimClock, WallClock
 from sage_robot.core.clock_follow import FollowerClock, publish_clock
 from sage_robot.core.config import Settings, load_profile
-from sage_robot.core.errors import SageError
+from sage_robot.core.errors import ConfigError, SageError
 from sage_robot.core.msgs import HealthReport
 from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
 from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
@@ -60,11 +62,12 @@ def group_settings(profile: str | None, overrides: dict[str, Any], connect: str)
 
 
 def group_specs(mode: str, nodes: list[str]) -> list[NodeSpec]:
-    """The specs of ``nodes`` as ``mode``'s profile has them (nodes it lacks: not critical)."""
-    base = {s.name: s for s in specs_for(mode)}
-    extra = [n for n in nodes if n not in base]
-    base.update({s.name: s for s in specs_for(mode, extra)[len(base):]})
-    return [base[n] for n in nodes]
+    """The specs of ``nodes`` as ``mode``'s profile has them (nodes it lacks: not critical).
+    Only these nodes' modules are imported."""
+    if mode not in PROFILES:
+        raise ConfigError(f"unknown mode {mode!r}; modes: {', '.join(sorted(PROFILES))}")
+    critical = dict(PROFILES[mode])
+    return [NodeSpec(n, node_class(n), critical.get(n, False)) for n in nodes]
 
 
 def make_clock(mode: str, start: float) -> Clock:

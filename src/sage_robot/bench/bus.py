@@ -1,4 +1,5 @@
-"""Bus throughput and publish→callback latency, small and LaserScan-sized messages.
+"""Bus throughput and publish→callback latency, small and LaserScan-sized messages; in one
+process, and between two processes over Zenoh (:mod:`sage_robot.bench.bus_zenoh`).
 
 Heavy packages are imported inside ``run`` in every bench module, so `sage --help`
 stays fast.
@@ -18,6 +19,10 @@ SCAN_BEAMS = 360  # a LaserScan like the RPLIDAR A1's
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--messages", type=int, default=20000, help="messages per case")
+    p.add_argument("--no-zenoh", action="store_true", help="only the in-process cases")
+    p.add_argument(
+        "--zenoh-scale", type=float, default=1.0, help="scale the Zenoh cases' message counts (e.g. 0.2)"
+    )
 
 
 async def _case(make: Any, n_subs: int, n_msgs: int) -> dict[str, float]:
@@ -75,7 +80,23 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         for n_subs in (1, 10):
             result = asyncio.run(_case(make, n_subs, args.messages))
             cases.append({"message": label, **result})
-    return {"bench": "bus", "cases": cases}
+    out: dict[str, Any] = {"bench": "bus", "cases": cases}
+    if not args.no_zenoh:
+        out["zenoh_cases"] = _zenoh_cases(args.zenoh_scale)
+    return out
+
+
+def _zenoh_cases(scale: float) -> list[dict[str, Any]] | str:
+    if scale <= 0:
+        from sage_robot.core.errors import SageError
+
+        raise SageError(f"--zenoh-scale must be > 0, got {scale:g}")
+    try:
+        from sage_robot.bench.bus_zenoh import default_cases, run_cases
+        from sage_robot.core.transport.zenoh_bus import ZenohTransport  # noqa: F401  (installed?)
+    except ImportError as exc:
+        return f"skipped: {exc} (pip install 'sage-robot[zenoh]')"
+    return run_cases(default_cases(scale))
 
 
 class _Stamped:

@@ -30,6 +30,7 @@ FRAME_W, FRAME_H = 480, 270  # the web page's camera frame
 JPEG_QUALITY = 80
 RECEIVE_TIMEOUT_S = 60.0  # a case's bound on waiting for the last message
 CHILD_START_S = 60.0
+DRAIN_S = 1.0  # after the publisher exited, wait this long for messages still on their way
 SETTLE_S = 0.5  # after the subscription matched, before the first message is sent
 BURST = 10  # flood: messages published between two yields to the loop
 TOPIC = "/bench/zenoh"
@@ -117,15 +118,16 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
     transport = ZenohTransport(_settings(robot, [f"tcp/127.0.0.1:{port}"], []))
     bus = Bus(WallClock(), transport)
     latencies: list[float] = []
+    times: list[float] = []  # first and last arrival
     done = asyncio.Event()
-    first: list[float] = []
 
     def on_msg(msg: Any) -> None:
         now = time.perf_counter()
         if _stamp(msg) == 0.0:  # the publisher's declaring message
             return
-        if not first:
-            first.append(now)
+        times[1:] = [now]
+        if len(times) == 1:
+            times.insert(0, now)
         latencies.append(now - _stamp(msg))
         if len(latencies) >= case.messages:
             done.set()
@@ -136,9 +138,7 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
         robot, str(port), case.kind, str(case.messages), str(case.rate_hz or 0),
     )
     try:
-        with contextlib.suppress(asyncio.TimeoutError):  # a lost message: reported as such
-            await asyncio.wait_for(done.wait(), RECEIVE_TIMEOUT_S + CHILD_START_S)
-        last = time.perf_counter()
+        await _until_received_or_exited(done, child)
     finally:
         try:
             await asyncio.wait_for(child.wait(), RECEIVE_TIMEOUT_S)
@@ -146,12 +146,27 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
             child.kill()
             await child.wait()
         transport.close()
-    return _summary(case, latencies, first[0] if first else last, last)
+    return _summary(case, latencies, times)
 
 
-def _summary(case: Case, latencies: list[float], t0: float, t1: float) -> dict[str, Any]:
+async def _until_received_or_exited(done: asyncio.Event, child: Any) -> None:
+    """Until every message arrived, or the publisher exited and :data:`DRAIN_S` passed (the
+    rest were lost), or the time is up."""
+    waiters = {asyncio.ensure_future(done.wait()), asyncio.ensure_future(child.wait())}
+    try:
+        await asyncio.wait(waiters, timeout=RECEIVE_TIMEOUT_S + CHILD_START_S, return_when="FIRST_COMPLETED")
+        if not done.is_set():
+            with contextlib.suppress(asyncio.TimeoutError):
+                await asyncio.wait_for(done.wait(), DRAIN_S)
+    finally:
+        for w in waiters:
+            w.cancel()
+
+
+def _summary(case: Case, latencies: list[float], times: list[float]) -> dict[str, Any]:
     lat = np.array(latencies or [float("nan")]) * 1e3
     received = len(latencies)
+    t0, t1 = (times[0], times[-1]) if times else (0.0, 0.0)
     return {
         "message": case.label,
         "transport": "zenoh, two processes",

@@ -48,6 +48,7 @@ TURN_STEP_RAD = 0.2  # on-the-spot turning between scans (1 rad/s)
 MIN_SEEN_HITS = 3  # a true wall cell counts as seen after this many lidar returns in it
 NAV_CLEARANCE_M = 0.15  # a planned path point this close to a true wall is a failure
 ROUTES = ("corridor", "auto")
+SUBMAP_EDGE_STRIDES = (4, 8, 16, 24)  # scan-to-submap edges (see SlamConfig)
 MAP_NORMAL_NEIGHBOURS = 32  # local-map normals for a lidar with 1 % range noise
 MAP_MIN_SUPPORT = 2  # keyframes that must agree on a local-map point
 SMALL_OBJECT_M = 0.25  # foreground objects this small (legs) are not matched
@@ -81,6 +82,9 @@ def slam_config(spec: Any) -> Any:
 
     return SlamConfig(
         max_range_m=spec.range_max_m,
+        submap_edge_strides=SUBMAP_EDGE_STRIDES,
+        calibrate_odometry=True,
+        oriented_normals=True,
         map_normal_neighbours=MAP_NORMAL_NEIGHBOURS,
         map_min_support=MAP_MIN_SUPPORT,
         drop_small_objects_m=SMALL_OBJECT_M,
@@ -110,7 +114,9 @@ def run_check(
         raise ConfigError(f"--map {path}: no such map file")
     route = route or ("corridor" if map_path is None else "auto")
     if route == "corridor" and path.resolve() != shipped_map().resolve():
-        raise ConfigError("--route corridor drives the shipped building's corridors: use --route auto with --map")
+        raise ConfigError(
+            "--route corridor drives the shipped building's corridors: use --route auto with --map"
+        )
     truth_grid = read_map(path)
     truth = plan_drive(truth_grid, route, max_length_m)
     world = SimDrive(truth_grid, truth, seed, people=people, clutter=clutter)
@@ -121,7 +127,8 @@ def run_check(
     for k in range(len(truth)):
         odom = world.odometry(k)
         ranges = world.ranges(k)
-        slam.add_scan(k * SCAN_PERIOD_S, odom, Scan(ranges, angles, sp.range_min_m, sp.range_max_m, world.laser))
+        scan = Scan(ranges, angles, sp.range_min_m, sp.range_max_m, world.laser)
+        slam.add_scan(k * SCAN_PERIOD_S, odom, scan)
     cpu_s = time.process_time() - t0
     _, est = slam.trajectory_array()
     true_xy = np.asarray(truth)[:, :2]
@@ -145,7 +152,7 @@ def run_check(
         "trajectory_error_mean_m": round(float(err.mean()), 4),
         "trajectory_error_max_m": round(float(err.max()), 4),
         "return_error_m": round(float(err[-1]), 4),
-        "odometry_end_error_m": round(math.hypot(world.odom[0] - truth[-1][0], world.odom[1] - truth[-1][1]), 3),
+        "odometry_end_error_m": round(math.dist(world.odom[:2], truth[-1][:2]), 3),
         **score.as_dict(),
         "occupied_recall": round(score.walls_found, 4),
         **_navigate(mapped, world.caster, truth[0], far),

@@ -95,14 +95,17 @@ def _spawn_people(grid: Any, start: Pose, rng: np.random.Generator) -> list[Any]
     for pid in range(n):
         x, y = spots[int(rng.integers(len(spots)))]
         speed = float(rng.uniform(*WALK_SPEED_MPS))
-        people.append(PersonState(pid, float(x), float(y), float(rng.uniform(-math.pi, math.pi)), speed_mps=speed))
+        heading = float(rng.uniform(-math.pi, math.pi))
+        people.append(PersonState(pid, float(x), float(y), heading, speed_mps=speed))
     return people
 
 
 class SimDrive:
     """Steps the world along true robot poses: scans, odometry and what the lidar saw."""
 
-    def __init__(self, grid: Any, truth: list[Pose], seed: int, people: bool = True, clutter: bool = True) -> None:
+    def __init__(
+        self, grid: Any, truth: list[Pose], seed: int, people: bool = True, clutter: bool = True
+    ) -> None:
         from sage_robot.sim.lidar import Lidar, LidarSpec
         from sage_robot.sim.people import Crowd
         from sage_robot.sim.raycast import GridRaycaster

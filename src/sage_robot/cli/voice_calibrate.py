@@ -43,6 +43,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from sage_robot.core.config import load_profile
     from sage_robot.voice.calibrate import (
         DEFAULT_MAX_FA_PER_HOUR,
+        THRESHOLDS,
         audio_files,
         calibrate_files,
         profile_update,
@@ -78,6 +79,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
           f"({cal.false_accepts_per_hour:.2f}/h, target <= {cal.max_fa_per_hour:g}/h"
           f"{'' if cal.meets_target else ': NOT MET'})")
     print(f"  best negative score {cal.negatives_best:.3f}, weakest positive {cal.positives_worst:.3f}")
+    if cal.band[0] <= THRESHOLDS[0]:
+        print("  warning: no negative came near the model's score: record more (and harder) "
+              "negatives for a threshold the negatives bound")  # fmt: skip
     if written:
         print(f"wrote voice.wake_model_thresholds/patience[{name}] to {written}")
     else:

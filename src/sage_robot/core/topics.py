@@ -8,6 +8,7 @@ the type checker holds every publisher and subscriber to it. Services and action
 from __future__ import annotations
 
 from sage_robot.core.bus import Topic
+from sage_robot.core.msgs.clock import SimTime
 from sage_robot.core.msgs.nav import LocalizationHealth, NavigateFeedback
 from sage_robot.core.msgs.sim import People, SpeakerBearing
 from sage_robot.core.msgs.std import (
@@ -28,7 +29,6 @@ from sage_robot.core.msgs.std import (
     Text,
     Twist,
 )
-from sage_robot.core.msgs.clock import SimTime
 from sage_robot.core.msgs.tour import TourState
 from sage_robot.core.msgs.voice import AudioChunk, Doa, TurnLatency, UiState
 

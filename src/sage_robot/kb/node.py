@@ -14,12 +14,14 @@ import asyncio
 from typing import Any
 
 from sage_robot.core import topics
+from sage_robot.core.embedding import SENTENCE_EMBEDDER
 from sage_robot.core.msgs.kb import SearchRequest, SearchResponse
 from sage_robot.core.node import Node
 from sage_robot.core.resources import ResourceKey
 from sage_robot.kb.service import KbService
 
 KB_SERVICE = ResourceKey("kb_service", KbService, "the kb node's, while it runs")
+SHARED_EMBEDDER = "all-MiniLM-L6-v2"  # the embedder the brain's semantic thresholds are set for
 
 
 class KbNode(Node):
@@ -44,6 +46,8 @@ class KbNode(Node):
                     if not r.ok:
                         self.log.warning("corpus document not ingested", error=r.message)
             self.ctx.resources[KB_SERVICE] = self.service
+            if self.service.embedder.name == SHARED_EMBEDDER:  # the brain's semantic fallback uses it too
+                self.ctx.resources.setdefault(SENTENCE_EMBEDDER, self.service.embedder)
             self.log.info("knowledge base ready", chunks=self.service.store.count_chunks(),
                           ingested=self.ingested)
         except BaseException as exc:
@@ -63,6 +67,8 @@ class KbNode(Node):
     async def teardown(self) -> None:
         self.bus.unserve(topics.KB_SEARCH)
         self.ctx.resources.pop(KB_SERVICE)
+        if self.service is not None and self.ctx.resources.get(SENTENCE_EMBEDDER) is self.service.embedder:
+            self.ctx.resources.pop(SENTENCE_EMBEDDER)
         if self.service is not None:
             service, self.service = self.service, None
             await self.clock.offload(service.close)

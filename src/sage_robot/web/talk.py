@@ -27,6 +27,7 @@ from urllib.parse import urlsplit
 from fastapi import APIRouter, HTTPException, Request, UploadFile
 from fastapi.responses import Response
 
+from sage_robot.brain.base import Utterance
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalTimeout
 from sage_robot.core.errors import SageError
@@ -75,7 +76,9 @@ async def converse(request: Request, question: str) -> str:
     if not bus.actions.has(topics.CONVERSE):
         raise HTTPException(status_code=503, detail="the brain is not running")
     st.hub.caption("visitor", question, "talk")
-    handle = await bus.actions.send_goal(topics.CONVERSE, Text(question))  # never waits
+    # Each visitor's device is a conversation of its own ("take me there" means their "there").
+    turn = Utterance(question, f"web:{client_key(request)}")
+    handle = await bus.actions.send_goal(topics.CONVERSE, turn)  # never waits
     try:  # the bound covers the wait behind other visitors' questions and the answer
         result = await handle.result(CONVERSE_TIMEOUT_S)
     except GoalTimeout:

@@ -14,6 +14,7 @@ publication, checked against the operator password; `sage topic pub`).
 
 from __future__ import annotations
 
+import atexit
 import hmac
 import json
 import logging
@@ -62,6 +63,7 @@ class ZenohTransport(Transport):
         self.received = 0
         self.rejected = 0  # frames that did not decode, refused publications
         self.closed = False
+        atexit.register(self.close)  # a session left open can hang the interpreter's exit
 
     # ------------------------------------------------------------ Transport
     def attach(self, deliver: Callable[[str, Any], None]) -> None:
@@ -110,6 +112,7 @@ class ZenohTransport(Transport):
         self._declared.clear()
         self._publishers.clear()
         self.session.close()
+        atexit.unregister(self.close)
 
     # ------------------------------------------------------------ publishing
     def _declare_publisher(self, topic: str) -> Any:

@@ -17,7 +17,9 @@ BREAK_M = 0.1  # consecutive returns farther apart than this (plus the beam spre
 BREAK_BEAMS = 3.0  # ...plus this many beam spacings at the range
 
 
-def small_foreground(ranges: np.ndarray, angles: np.ndarray, hits: np.ndarray, max_extent_m: float) -> np.ndarray:
+def small_foreground(
+    ranges: np.ndarray, angles: np.ndarray, hits: np.ndarray, max_extent_m: float
+) -> np.ndarray:
     """Mask (like ``hits``) of the returns that belong to small foreground objects."""
     out = np.zeros(len(ranges), dtype=bool)
     idx = np.nonzero(hits)[0]

@@ -77,6 +77,7 @@ class SlamConfig:
     loop_information_scale: float = 0.5  # a loop edge counts this much of a scan-match edge
     loop_every_keyframes: int = 2  # try a loop closure every this many keyframes
     calibrate_odometry: bool = True  # learn the odometry's scale and heading drift (odomcal)
+    oriented_normals: bool = True  # match only map surfaces that face the scan's sensor
     # > 0: the local map's normals are fitted again on the merged keyframes, to this many
     # neighbours within map_normal_radius_m (for a noisy lidar; 0: each keyframe's own normals)
     map_normal_neighbours: int = 0
@@ -298,7 +299,7 @@ class Slam:
         if len(pts) < MIN_SCAN_POINTS:
             self._local = None
             return
-        self._local = PointMap(pts, cfg.match, cfg.search_xy_m, nrm, oriented=True)
+        self._local = PointMap(pts, cfg.match, cfg.search_xy_m, nrm, oriented=cfg.oriented_normals)
         if cfg.map_normal_neighbours > 0:
             self._local.normals = smooth_normals(
                 pts, self._local.tree, nrm, cfg.map_normal_neighbours, cfg.map_normal_radius_m
@@ -335,7 +336,7 @@ class Slam:
         pts, nrm = self._points_of(members)
         if len(pts) < MIN_SCAN_POINTS:
             return False
-        sub = PointMap(pts, cfg.match, cfg.loop_search_xy_m, nrm, oriented=True)
+        sub = PointMap(pts, cfg.match, cfg.loop_search_xy_m, nrm, oriented=cfg.oriented_normals)
         q = voxel_filter(self.keyframes[k].points, cfg.scan_voxel_m)
         guess = self.graph.poses[k]
         init, score = sub.search(

@@ -97,7 +97,9 @@ def walls_found(truth: OccupancyGrid, seen: np.ndarray, mapped: OccupancyGrid, t
     return float(near.mean())
 
 
-def score_map(truth: OccupancyGrid, mapped: OccupancyGrid, seen: np.ndarray, tol_m: float = MATCH_TOL_M) -> MapScore:
+def score_map(
+    truth: OccupancyGrid, mapped: OccupancyGrid, seen: np.ndarray, tol_m: float = MATCH_TOL_M
+) -> MapScore:
     """Compare a SLAM map with the truth; ``seen``: true-grid mask of the cells the lidar hit."""
     if seen.shape != truth.data.shape:
         raise ValueError(f"seen mask {seen.shape} does not match the true grid {truth.data.shape}")

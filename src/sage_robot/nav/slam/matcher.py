@@ -32,7 +32,9 @@ MIN_MATCH_POINTS = 10  # fewer scan points than this: no match
 GATE_SIGMAS = 2.5  # association gates widen by this many range-noise sigmas
 
 
-def smooth_normals(pts: np.ndarray, tree: cKDTree, oriented: np.ndarray, k: int, radius_m: float) -> np.ndarray:
+def smooth_normals(
+    pts: np.ndarray, tree: cKDTree, oriented: np.ndarray, k: int, radius_m: float
+) -> np.ndarray:
     """Normals of ``pts`` fitted to ``k`` neighbours within ``radius_m`` (a noisy lidar's walls
     are bands: few neighbours give tilted normals, which ICP takes for features along a bare
     wall), each turned to the side of the given ``oriented`` normal."""
@@ -232,7 +234,9 @@ class PointMap:
         facing: np.ndarray = np.einsum("ij,ij->i", self.normals[j], sensor - p) > 0.0
         return facing
 
-    def _gates(self, q: np.ndarray, viewpoint: tuple[float, float], gate: float) -> tuple[np.ndarray, np.ndarray]:
+    def _gates(
+        self, q: np.ndarray, viewpoint: tuple[float, float], gate: float
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Per point: association gate (m) and weight (1 = a point with point_sigma_m noise)."""
         cfg = self.config
         noise = cfg.range_noise_fraction * np.hypot(q[:, 0] - viewpoint[0], q[:, 1] - viewpoint[1])

@@ -1,0 +1,57 @@
+"""The follower clock: time from /clock messages (use_sim_time), on one bus and by hand."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from sage_robot.core.bus import Bus
+from sage_robot.core.clock import SimClock
+from sage_robot.core.clock_follow import CLOCK_PERIOD_S, FollowerClock, publish_clock
+from tests.support.waits import until
+
+
+def test_sleepers_wake_when_clock_passes_their_deadline_and_time_never_goes_back() -> None:
+    async def body() -> None:
+        clock = FollowerClock()
+        woke: list[float] = []
+
+        async def sleeper() -> None:
+            await clock.sleep(1.0)
+            woke.append(clock.now())
+
+        task = asyncio.get_running_loop().create_task(sleeper())
+        await asyncio.sleep(0)
+        clock.follow(0.5)
+        await asyncio.sleep(0)
+        assert woke == []
+        clock.follow(1.02)
+        await until(lambda: woke, "the sleeper woke")
+        assert woke == [1.02]
+        clock.follow(0.3)  # a late message: time stays
+        assert clock.now() == 1.02
+        await task
+
+    asyncio.run(body())
+
+
+def test_a_follower_keeps_the_simulators_time_through_clock_messages() -> None:
+    async def body() -> None:
+        sim = SimClock()
+        bus = Bus(sim)
+        follower = FollowerClock()
+        sub = follower.attach(bus)
+        timer = publish_clock(bus, sim)
+        ticks: list[float] = []
+        follower.every(0.25, lambda: ticks.append(follower.now()), "follower tick")
+        for _ in range(round(1.0 / CLOCK_PERIOD_S)):
+            await sim.step(CLOCK_PERIOD_S)
+        await until(lambda: follower.now() >= 1.0 - 1e-9, "the follower reached 1 s")
+        assert abs(follower.now() - sim.now()) < 1e-9
+        assert ticks == pytest.approx([0.25, 0.5, 0.75, 1.0], abs=CLOCK_PERIOD_S)
+        assert follower.ticks >= 1
+        timer.cancel()
+        sub.close()
+
+    asyncio.run(body())

@@ -1,0 +1,148 @@
+"""Process groups: the profile's grouping, and groups as real processes under one supervisor.
+
+The supervisor's Zenoh router listens on a free loopback port and each test uses its own
+robot id, so parallel runs do not hear each other. Waits are bounded; how long a restart
+took is printed (measured), never asserted.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from sage_robot.app.process_groups import PROCESS_PREFIX, GroupSupervisor, plan_groups
+from sage_robot.app.profiles import PROFILES
+from sage_robot.core import topics
+from sage_robot.core.config import load_profile, parse_profile
+from sage_robot.core.config.processes import DEFAULT_GROUPS, ProcessSettings, group_of
+from sage_robot.core.errors import ConfigError
+from sage_robot.core.msgs import Event, Odometry
+from sage_robot.core.node import NodeState
+from tests.support.waits import until
+
+START_S = 90.0  # bound on a group coming up (imports and Zenoh on a loaded 2-core machine)
+
+# Packages the motion process must never import (models, speech, ML runtimes).
+ML_PACKAGES = {"torch", "onnxruntime", "transformers", "sentence_transformers", "faster_whisper",
+               "ctranslate2", "openwakeword", "sklearn", "llama_cpp", "tokenizers", "huggingface_hub",
+               "sounddevice", "webrtcvad", "fastapi", "uvicorn"}
+UPPER_LAYERS = ("sage_robot.voice", "sage_robot.brain", "sage_robot.kb", "sage_robot.nav", "sage_robot.sim")
+
+
+@pytest.mark.parametrize("mode", sorted(PROFILES))
+def test_the_default_groups_place_every_node_of_every_mode_once(mode: str) -> None:
+    nodes = [n for n, _ in PROFILES[mode]] + ["ros2_bridge"]
+    groups = group_of(DEFAULT_GROUPS, nodes)
+    placed = [n for members in groups.values() for n in members]
+    assert sorted(placed) == sorted(nodes)
+    assert groups.get("motion", []) == [n for n in nodes if n in DEFAULT_GROUPS["motion"]]
+
+
+def test_a_node_in_no_group_or_in_two_is_a_one_line_error_naming_it() -> None:
+    with pytest.raises(ConfigError, match="node 'voice' is in no process group.*processes.groups"):
+        group_of({"motion": ("serial_bridge",)}, ["serial_bridge", "voice"])
+    text = "processes:\n  groups:\n    motion: [serial_bridge, web]\n    web: [web]\n"
+    with pytest.raises(ConfigError) as err:
+        parse_profile(text, "robot.yaml")
+    assert "node 'web' is in two groups: 'motion' and 'web'" in str(err.value)
+    assert "robot.yaml" in str(err.value)
+
+
+def test_a_simulated_run_without_the_sim_group_is_refused(tmp_path: Path) -> None:
+    settings = _settings("x", "tcp/127.0.0.1:1", {"nav": ("navigator",)})
+    with pytest.raises(ConfigError, match="needs the 'sim' group"):
+        plan_groups(settings, "sim", [("navigator", True)], "tcp/127.0.0.1:1", str(tmp_path))
+
+
+def test_the_motion_process_imports_no_ml_package() -> None:
+    """The motion group's process as group_main builds it: its nodes' classes and its transport."""
+    nodes = list(DEFAULT_GROUPS["motion"])
+    code = (
+        "import sys, json\n"
+        "from sage_robot.app import group_main\n"
+        "from sage_robot.core.transport import zenoh_bus\n"
+        "from sage_robot.web import auth\n"
+        f"specs = group_main.group_specs('sim', {nodes!r})\n"
+        "print(json.dumps(sorted(sys.modules)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    modules = set(json.loads(out.stdout))
+    assert "sage_robot.hardware.mcu.bridge" in modules and "zenoh" in modules  # it did build the group
+    assert sorted(m for m in modules if m.split(".")[0] in ML_PACKAGES) == []
+    assert sorted(m for m in modules if m.startswith(UPPER_LAYERS)) == []
+
+
+def _settings(robot: str, endpoint: str, groups: dict[str, tuple[str, ...]]) -> Any:
+    base = load_profile(None, {"bus": {"robot_id": robot, "zenoh": {"listen": [endpoint]}}})
+    return base.model_copy(update={"processes": ProcessSettings(groups=groups)})
+
+
+def test_a_killed_group_comes_back_alone_and_the_others_keep_their_pids(tmp_path: Path) -> None:
+    """sim (the world, the firmware model, /clock), motion (the serial bridge on the sim's pty,
+    following /clock) and aux (the battery watchdog): kill -9 aux, then motion."""
+    from sage_robot.app.zenoh_hub import ZenohHub
+    from tests.core.zenoh_peer import free_port, unique_robot
+
+    robot, endpoint = unique_robot(), f"tcp/127.0.0.1:{free_port()}"
+    groups = {"sim": ("sim_world", "mcu_sim"), "motion": ("serial_bridge", "heartbeat"),
+              "aux": ("battery_watchdog",)}
+    overrides = {"bus": {"robot_id": robot}, "sim": {"camera_hz": 0}}
+    nodes = [("sim_world", True), ("mcu_sim", True), ("serial_bridge", True), ("heartbeat", False),
+             ("battery_watchdog", False)]
+    plans = plan_groups(_settings(robot, endpoint, groups), "sim", nodes, endpoint, str(tmp_path), None, overrides)
+
+    async def body() -> None:
+        hub = ZenohHub(endpoint, robot)
+        sup = GroupSupervisor(plans, hub)
+        odom: list[Odometry] = []
+        events: list[Event] = []
+        hub.subscribe(topics.ODOM, odom.append)
+        hub.subscribe(topics.EVENTS, events.append)
+        await sup.start()
+        try:
+            await _crash_and_recover(sup, odom, events)
+        finally:
+            await sup.stop()
+            hub.close()
+        assert all(g.state is NodeState.STOPPED for g in sup.groups.values())
+        assert all(g.proc is not None and g.proc.returncode is not None for g in sup.groups.values())
+
+    asyncio.run(body())
+
+
+async def _crash_and_recover(sup: GroupSupervisor, odom: list[Odometry], events: list[Event]) -> None:
+    g = sup.groups
+    await until(lambda: all(p.state is NodeState.RUNNING for p in g.values()) and odom,
+                "every group running and /odom from the bridge", START_S)
+    # The motion group follows the simulator's /clock: its report and the odometry are in sim time.
+    await until(lambda: g["motion"].report is not None and g["motion"].report.stamp > 0.5, "motion at 0.5 s", START_S)
+    assert sup.sim_time is not None
+    assert abs(g["motion"].report.stamp - sup.sim_time) < 2.0  # type: ignore[union-attr]
+    assert odom[-1].stamp <= sup.sim_time + 1.0
+
+    pids = {name: p.pid for name, p in g.items()}
+    os.kill(pids["aux"], signal.SIGKILL)
+    t0 = time.monotonic()
+    await until(lambda: g["aux"].state is NodeState.RUNNING and g["aux"].pid != pids["aux"], "aux back", START_S)
+    print(f"aux back in {time.monotonic() - t0:.2f} s after kill -9")
+    assert {n: p.pid for n, p in g.items() if n != "aux"} == {n: pids[n] for n in pids if n != "aux"}
+    assert (g["aux"].restarts, g["sim"].restarts, g["motion"].restarts) == (1, 0, 0)
+    entry = {h.name: h for h in sup.health_msg().nodes}[f"{PROCESS_PREFIX}aux"]
+    assert (entry.state, entry.restarts, entry.last_error) == ("running", 1, "process killed by signal 9")
+    assert events == []  # aux holds no critical node: no stop
+
+    os.kill(pids["motion"], signal.SIGKILL)  # the serial bridge's process: critical
+    await until(lambda: any(e.kind == "safety_stop" and "motion" in e.message for e in events), "a safety stop")
+    seen = len(odom)
+    await until(lambda: g["motion"].state is NodeState.RUNNING and len(odom) > seen + 5, "motion back, odom again",
+                START_S)
+    assert g["sim"].pid == pids["sim"] and g["aux"].restarts == 1

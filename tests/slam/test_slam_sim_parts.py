@@ -1,0 +1,85 @@
+"""The parts of the corridor fix and of the simulation scores, each on a small drawn case."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from sage_robot.core.geometry import compose
+from sage_robot.nav.slam.dynamic import small_foreground
+from sage_robot.nav.slam.mapscore import score_map
+from sage_robot.nav.slam.matcher import MatchConfig, PointMap
+from sage_robot.nav.slam.odomcal import OdometryCalibration
+from sage_robot.sim.raycast import ray_circles
+from tests.support.grids import room
+
+STEP_M = 0.1
+
+
+def test_a_perfect_map_scores_zero_and_a_shifted_one_does_not() -> None:
+    truth = room(6.0, 4.0, wall_cells=2)
+    seen = truth.data == 100
+    perfect = score_map(truth, truth, seen)
+    assert perfect.wall_distance_mean_m == 0.0
+    assert perfect.walls_found == 1.0
+    assert perfect.precision == 1.0
+    shifted = dataclasses.replace(truth, origin=dataclasses.replace(truth.origin, x=truth.origin.x + 0.3))
+    off = score_map(truth, shifted, seen)
+    assert off.wall_distance_mean_m > 0.05
+    assert off.walls_found < 0.95
+
+
+def test_legs_in_front_of_a_wall_are_small_foreground_and_the_wall_is_not() -> None:
+    angles = -math.pi + 2 * math.pi * np.arange(360) / 360
+    walls = np.full(360, 5.0)  # a round room, 5 m all around
+    legs = np.array([[2.0, 0.11, 0.07], [2.0, -0.11, 0.07]])
+    ranges = np.minimum(walls, ray_circles(0.0, 0.0, angles, legs))
+    hits = np.isfinite(ranges)
+    small = small_foreground(ranges, angles, hits, 0.25)
+    assert small.any()
+    assert np.array_equal(small, ranges < 4.0)  # exactly the beams that hit a leg
+    assert not small_foreground(walls, angles, hits, 0.25).any()
+
+
+def test_odometry_scale_and_heading_drift_are_learnt_where_the_scans_pin_the_pose() -> None:
+    cal = OdometryCalibration()
+    pose = odom = (0.0, 0.0, 0.0)
+    everywhere = np.diag([1e4, 1e4, 1e5])
+    true_step = (STEP_M, 0.0, 0.0)
+    odom_step = (STEP_M * 1.02, 0.0, 0.01 * STEP_M)  # 2 % long, 0.01 rad/m heading drift
+    for _ in range(200):
+        pose, odom = compose(pose, true_step), compose(odom, odom_step)
+        cal.observe(pose, odom, everywhere)
+    assert cal.calibrated
+    assert abs(cal.scale - 1 / 1.02) < 0.002
+    assert abs(cal.yaw_per_m - 0.01) < 0.001
+    corrected = cal.correct(odom_step)
+    assert abs(corrected[0] - STEP_M) < 0.0005
+    assert abs(corrected[2]) < 0.0002
+
+
+def test_a_corridor_match_teaches_the_odometry_nothing() -> None:
+    cal = OdometryCalibration()
+    pose = odom = (0.0, 0.0, 0.0)
+    across_only = np.diag([1.0, 1e4, 1e5])  # a bare corridor along x
+    for _ in range(200):
+        pose, odom = compose(pose, (STEP_M, 0.0, 0.0)), compose(odom, (STEP_M * 1.02, 0.0, 0.0))
+        cal.observe(pose, odom, across_only)
+    assert not cal.calibrated
+    assert cal.correct((STEP_M, 0.0, 0.0)) == (STEP_M, 0.0, 0.0)
+
+
+def test_the_far_face_of_a_thin_wall_is_not_taken_for_the_near_one() -> None:
+    ys = np.arange(-2.0, 2.0, 0.03)
+    west_face = np.column_stack((np.zeros_like(ys), ys))  # mapped from the west: faces -x
+    facing_west = np.tile([-1.0, 0.0], (len(ys), 1))
+    # From (2, 0) the robot sees the wall's east face, 0.2 m further east.
+    scan = np.column_stack((np.full_like(ys, 0.2 - 2.0), ys))
+    oriented = PointMap(west_face, MatchConfig(), 1.0, facing_west, oriented=True)
+    assert oriented.refine(scan, (2.0, 0.0, 0.0)).inliers == 0.0
+    naive = PointMap(west_face, MatchConfig(), 1.0, facing_west)
+    fooled = naive.refine(scan, (2.0, 0.0, 0.0))
+    assert fooled.inliers > 0.9
+    assert abs(fooled.pose[0] - 1.8) < 0.01
