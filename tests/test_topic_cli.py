@@ -6,15 +6,23 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 pytest.importorskip("zenoh")
 
+from sage_robot.app.launcher import NodeSpec
+from sage_robot.app.recording.mcap_io import read_mcap
+from sage_robot.app.registry import node_class
+from sage_robot.app.runtime import make_context, make_transport, run_launcher
 from sage_robot.cli.main import main
-from sage_robot.core.config import load_profile
-from sage_robot.core.msgs import Text
+from sage_robot.core import topics
+from sage_robot.core.bus import LocalTransport
+from sage_robot.core.config import load_profile, parse_profile
+from sage_robot.core.msgs import HealthReport, LaserScan, Text
 from sage_robot.core.transport.remote import RemoteRobot
+from sage_robot.core.transport.zenoh_bus import ZenohTransport
 from tests.core.zenoh_peer import PASSWORD, free_port, running_peer, unique_robot
 from tests.support.waits import wait_until
 
@@ -135,3 +143,67 @@ def test_status_reads_the_health_topic_over_zenoh(robot_profile: str, capsys: Ca
     assert code == 0
     code, out, _ = sage(capsys, "--profile", robot_profile, "status")
     assert out.splitlines()[1].split()[:2] == ["peer", "running"]
+
+
+async def test_a_robot_on_the_zenoh_bus_answers_tools_and_closes_its_session() -> None:
+    robot, port = unique_robot(), free_port()
+    settings = parse_profile(
+        f"sim:\n  speed: null\nbus:\n  transport: zenoh\n  robot_id: {robot}\n"
+        f"  zenoh:\n    listen: [tcp/127.0.0.1:{port}]\n"
+    )
+    ctx = make_context(settings, simulated=True)
+    transport = ctx.bus.transport
+    assert isinstance(transport, ZenohTransport)
+    seen: dict[str, Any] = {}
+
+    async def attach(_launcher: Any) -> None:
+        # The tool's calls block this loop: Zenoh's threads answer them from what the bus
+        # has published (the launcher's first /sage/health).
+        with RemoteRobot(settings.bus) as tool:
+            tool.require_connected()
+            seen["health"] = tool.last(str(topics.HEALTH))
+            seen["topics"] = tool.topics()
+
+    specs = [NodeSpec("heartbeat", node_class("heartbeat"))]
+    await run_launcher(ctx, specs, until=1.0, after_start=attach)
+    assert isinstance(seen["health"], HealthReport)
+    assert [n.name for n in seen["health"].nodes] == ["heartbeat"]
+    assert seen["topics"]["/sage/health"]["type"] == "HealthReport"
+    assert transport.closed
+
+
+def test_the_default_profile_keeps_the_bus_local() -> None:
+    assert isinstance(make_transport(parse_profile("")), LocalTransport)
+
+
+def test_status_falls_back_to_the_web_server_when_no_zenoh_robot_answers(
+    tmp_path: Path, capsys: Cap
+) -> None:
+    profile = tmp_path / "local.yaml"
+    profile.write_text(
+        f"web:\n  port: {free_port()}\nbus:\n  robot_id: {unique_robot()}\n"
+        f"  zenoh:\n    listen: [tcp/127.0.0.1:{free_port()}]\n"
+    )
+    code, _, err = sage(capsys, "--profile", str(profile), "status")
+    assert code == 2
+    assert "no robot answers at http" in err  # the web path, after the Zenoh probe found nobody
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_record_attaches_to_a_running_robot(robot_profile: str, tmp_path: Path, capsys: Cap) -> None:
+    out = tmp_path / "attached.mcap"
+    argv = ("--profile", robot_profile, "record", str(out), "--attach", "--topics", "/scan", "/cmd_vel")
+    code, printed, _ = sage(capsys, *argv, "--duration", "1.0")
+    assert code == 0
+    assert printed.startswith(f"wrote {out}")
+    recorded = list(read_mcap(out))
+    assert recorded
+    assert {topic for topic, _, _ in recorded} == {"/scan"}  # nobody published /cmd_vel
+    assert all(isinstance(msg, LaserScan) and msg.ranges.shape == (360,) for _, _, msg in recorded)
+
+
+def test_topic_without_a_subcommand_shows_its_help(capsys: Cap) -> None:
+    code, out, _ = sage(capsys, "topic")
+    assert code == 0
+    for sub in ("list", "echo", "hz", "pub"):
+        assert sub in out

@@ -55,3 +55,13 @@ def test_a_follower_keeps_the_simulators_time_through_clock_messages() -> None:
         sub.close()
 
     asyncio.run(body())
+
+
+def test_the_clock_message_round_trips_through_json_and_the_wire() -> None:
+    from sage_robot.core.msgs import from_dict, to_dict
+    from sage_robot.core.msgs.clock import SimTime
+
+    msg = SimTime(12.345)
+    assert from_dict(to_dict(msg)) == msg
+    wire = pytest.importorskip("sage_robot.core.transport.wire")
+    assert wire.decode(wire.encode(msg)) == msg

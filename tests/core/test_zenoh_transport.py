@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import struct
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -21,14 +22,14 @@ from sage_robot.core.bus import Bus
 from sage_robot.core.clock import WallClock
 from sage_robot.core.config import parse_profile
 from sage_robot.core.config.bus import BusSettings, ZenohSettings
-from sage_robot.core.errors import ConfigError, SageError
+from sage_robot.core.errors import ConfigError, SageError, ServiceError, ServiceTimeout, ServiceUnavailable
 from sage_robot.core.msgs import LaserScan, Text, Twist
 from sage_robot.core.transport import wire
-from sage_robot.core.transport.keys import check_topic, topic_key, topic_of
+from sage_robot.core.transport.keys import check_topic, session_config, topic_key, topic_of
 from sage_robot.core.transport.remote import RemoteRobot
 from sage_robot.core.transport.zenoh_bus import ZenohTransport
 from tests.core.test_msgs import EXAMPLES
-from tests.core.zenoh_peer import HEARD, free_port, running_peer, unique_robot
+from tests.core.zenoh_peer import HEARD, UPPER, free_port, running_peer, unique_robot
 from tests.support.waits import until
 
 
@@ -162,7 +163,7 @@ async def test_two_processes_exchange_typed_messages(peer: tuple[str, int]) -> N
         transport.close()
 
 
-async def test_a_remote_message_of_the_wrong_type_is_dropped(peer: tuple[str, int]) -> None:
+async def test_a_remote_message_of_the_wrong_type_or_no_frame_is_dropped(peer: tuple[str, int]) -> None:
     robot, port = peer
     # Peers do not route for each other: this bus listens so that the tool (told of it by the
     # peer's gossip) can reach it.
@@ -179,6 +180,12 @@ async def test_a_remote_message_of_the_wrong_type_is_dropped(peer: tuple[str, in
                 return bus.remote_rejected
 
             await until(refused, "the bus refused the Text", poll=0.05)
+
+            def junk_refused() -> int:
+                tool.session.put(topic_key(robot, "/peer/heard"), b"\x80\x04junk")  # e.g. a pickle
+                return transport.rejected
+
+            await until(junk_refused, "the transport refused a frame that is not one", poll=0.05)
         assert twists.pending() == 0
     finally:
         transport.close()
@@ -198,3 +205,55 @@ def test_a_busy_listen_port_is_a_one_line_error(peer: tuple[str, int]) -> None:
     with pytest.raises(SageError, match="cannot open the Zenoh session") as err:
         ZenohTransport(_settings(unique_robot(), [f"tcp/127.0.0.1:{port}"], []))
     assert "\n" not in str(err.value)
+
+
+def test_a_zenoh_config_file_rules_where_the_profile_is_silent(tmp_path: Path) -> None:
+    conf = tmp_path / "zenoh.json5"
+    conf.write_text(
+        '{ mode: "client", connect: { endpoints: ["tls/router.lab:7447"] },\n'
+        '  transport: { auth: { usrpwd: { user: "robot", password: "pw" } } } }\n'
+    )
+    cfg = session_config(ZenohSettings(config_file=str(conf)), None, None)
+    assert cfg.get_json("mode") == '"client"'
+    assert cfg.get_json("connect/endpoints") == '["tls/router.lab:7447"]'
+    assert cfg.get_json("transport/auth/usrpwd/user") == '"robot"'
+    cfg = session_config(ZenohSettings(config_file=str(conf), connect=("tcp/10.0.0.2:7450",)), None, None)
+    assert cfg.get_json("connect/endpoints") == '["tcp/10.0.0.2:7450"]'
+    with pytest.raises(ConfigError, match="not found"):
+        session_config(ZenohSettings(config_file=str(tmp_path / "none.json5")), None, None)
+
+
+async def test_a_service_of_another_process_is_called_through_the_bus(peer: tuple[str, int]) -> None:
+    robot, port = peer
+    transport = ZenohTransport(_settings(robot, [], [f"tcp/127.0.0.1:{port}"]))
+    bus = Bus(WallClock(), transport)
+    try:
+        reply = await until_value(lambda: bus.call(UPPER, Text("hello"), timeout=2.0))
+        assert reply == Text("HELLO")
+        with pytest.raises(ServiceError, match="boom was asked for"):
+            await bus.call(UPPER, Text("boom"), timeout=2.0)
+        with pytest.raises(ServiceTimeout, match=r"within 0\.3 s"):
+            await bus.call(UPPER, Text("slow"), timeout=0.3)
+        with pytest.raises(ServiceUnavailable, match="/peer/nothing"):
+            await bus.call("/peer/nothing", Text("x"), timeout=2.0)
+        assert transport.services.called >= 4
+    finally:
+        transport.close()
+
+
+async def until_value(make_call: Any) -> Any:
+    """The call's reply, asked again while the peer's queryable is not yet known here."""
+    result: list[Any] = []
+
+    async def attempt() -> bool:
+        try:
+            result.append(await make_call())
+        except ServiceUnavailable:
+            return False
+        return True
+
+    for _ in range(100):  # bounded: 100 tries of at most a few ms each
+        if await attempt():
+            return result[0]
+        await asyncio.sleep(0.05)
+    raise AssertionError("the peer's service never became reachable")

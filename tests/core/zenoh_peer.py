@@ -3,8 +3,9 @@
 ``python tests/core/zenoh_peer.py ROBOT_ID PORT [CONNECT]``: a bus on the wall clock with a
 Zenoh transport listening on 127.0.0.1:PORT. It publishes a 360-beam ``/scan`` at
 :data:`SCAN_HZ` and the latched ``/sage/health`` once, answers every ``/cmd_vel`` it hears
-with ``/peer/heard`` (the speed as text), prints ``ready`` and runs until stdin closes (the
-test ends it) or :data:`MAX_RUN_S` passes. The operator password is ``$SAGE_OPERATOR_PASSWORD``.
+with ``/peer/heard`` (the speed as text), serves :data:`UPPER`, prints ``ready`` and runs
+until stdin closes (the test ends it) or :data:`MAX_RUN_S` passes. The operator password is
+``$SAGE_OPERATOR_PASSWORD``.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ MAX_RUN_S = 120.0  # a forgotten peer ends by itself
 READY_S = 60.0  # bound on the peer's start (imports on a loaded machine)
 STOP_S = 10.0
 HEARD = Topic("/peer/heard", Text)
+UPPER = "/peer/upper"  # service: Text -> Text in capitals; "boom" fails, "slow" takes 5 s
+SLOW_S = 5.0
 PASSWORD = "peer-test-password"
 
 
@@ -106,10 +109,19 @@ async def main(robot: str, port: int, connect: list[str]) -> None:
         transport.close()
 
 
+async def _upper(request: Text) -> Text:
+    if request.data == "boom":
+        raise ValueError("boom was asked for")
+    if request.data == "slow":
+        await asyncio.sleep(SLOW_S)
+    return Text(request.data.upper())
+
+
 async def _serve(bus: Bus) -> None:
     bus.declare(topics.HEALTH, latched=True)
     bus.subscribe(topics.CMD_VEL, Twist, lambda m: bus.publish(HEARD, Text(f"{m.linear_x:g}")))
     bus.publish(topics.HEALTH, HealthReport(0.0, (NodeHealth("peer", "running", critical=True),)))
+    bus.serve(UPPER, _upper)
     ranges = np.linspace(0.5, 5.0, SCAN_BEAMS, dtype=np.float32)
     ranges[0] = np.inf
     stdin_closed = threading.Event()

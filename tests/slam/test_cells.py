@@ -3,6 +3,7 @@ rounded on a turned 5 cm / 0.25° grid stands for."""
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -147,3 +148,22 @@ def test_mit_csail_odometry_is_inside_exactly_where_the_reference_equals_it(
     assert out["cell_relations"] == 1044
     assert out["cell_inside_trans"] == pytest.approx(out["reference_equal_odometry"], abs=1e-3)
     assert out["cell_trans_mean_m"] > 0.01
+
+
+def test_bench_prints_the_cell_scores(
+    shared_data: Callable[[str], Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    from sage_robot.cli.main import main
+
+    log = shared_data("slam/mit-csail/mit-csail.clf")
+    rels = shared_data("slam/mit-csail/mit-csail.relations")
+    rc = main(["bench", "slam", "--log", str(log), "--relations", str(rels), "--limit", "150", "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["cell_relations"] == out["short_relations"] == out["relations"] > 0
+    assert out["long_relations"] == 0  # the first 150 scans hold no revisit
+    # the distance to a box is never more than to its centre
+    assert 0.0 <= out["cell_trans_mean_m"] < out["short_trans_error_mean_m"]
+    # SLAM lands inside more cells than the raw odometry (inside exactly where the reference
+    # equals it, see the test above)
+    assert out["cell_inside_trans"] > out["reference_equal_odometry"]

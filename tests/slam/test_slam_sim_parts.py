@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from sage_robot.core.geometry import compose
-from sage_robot.nav.slam.dynamic import small_foreground
+from sage_robot.nav.slam.dynamic import small_foreground, supported
 from sage_robot.nav.slam.mapscore import score_map
 from sage_robot.nav.slam.matcher import MatchConfig, PointMap
 from sage_robot.nav.slam.odomcal import OdometryCalibration
@@ -83,3 +83,15 @@ def test_the_far_face_of_a_thin_wall_is_not_taken_for_the_near_one() -> None:
     fooled = naive.refine(scan, (2.0, 0.0, 0.0))
     assert fooled.inliers > 0.9
     assert abs(fooled.pose[0] - 1.8) < 0.01
+
+
+def test_points_only_one_keyframe_saw_drop_out_of_the_local_map() -> None:
+    wall = np.column_stack((np.linspace(0.0, 1.0, 11), np.zeros(11)))
+    leg_then, leg_now = np.array([[0.5, 1.0]]), np.array([[0.9, 1.0]])
+    pts = np.concatenate((wall, leg_then, wall + 0.01, leg_now))
+    owner = np.repeat([0, 0, 1, 1], [11, 1, 11, 1])
+    kept = supported(pts, owner, 0.15, 2)
+    assert kept[:11].all()
+    assert kept[12:23].all()
+    assert not kept[11]
+    assert not kept[23]

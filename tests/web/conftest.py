@@ -76,8 +76,11 @@ def hand_drawn_map() -> OccupancyGrid:
 class SimRobot:
     """The running system; test code calls into its loop thread-safely."""
 
-    def __init__(self, tmp: Path, *, with_converse: bool = True, mcu: dict[str, Any] | None = None) -> None:
+    def __init__(self, tmp: Path, *, with_converse: bool = True, mcu: dict[str, Any] | None = None,
+                 web: dict[str, Any] | None = None, extra_nodes: tuple[str, ...] = ()) -> None:
         self.tmp = tmp
+        self.web = web or {}  # profile overrides of the web section (e.g. tls: on)
+        self.extra_nodes = extra_nodes  # more registered nodes to run (e.g. "voice")
         self.mcu = mcu or {}  # profile overrides of the mcu section (e.g. the firmware dialect)
         self.with_converse = with_converse
         self.loop = asyncio.new_event_loop()
@@ -124,7 +127,7 @@ class SimRobot:
         settings = load_profile(
             None,
             {
-                "web": {"host": "127.0.0.1", "port": 0},
+                "web": {"host": "127.0.0.1", "port": 0, **self.web},
                 "nav": {"waypoints": str(waypoints)},
                 "sim": {"speed": 1.0},
                 **({"mcu": self.mcu} if self.mcu else {}),
@@ -133,7 +136,8 @@ class SimRobot:
         self.ctx = make_context(settings, simulated=True)
         self.bus = self.ctx.bus
         critical = dict(PROFILES["sim"])
-        wanted = [*(n for n in WORLD_NODES if n in NODES), "mcu_sim", "serial_bridge", "web"]
+        world = [n for n in WORLD_NODES if n in NODES]
+        wanted = [*world, *self.extra_nodes, "mcu_sim", "serial_bridge", "web"]
         specs = []
         for name in wanted:
             try:

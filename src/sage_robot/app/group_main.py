@@ -35,6 +35,7 @@ from sage_robot.app.launcher import HEALTH_TOPIC, Launcher, NodeSpec
 from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import node_class
 from sage_robot.app.runtime import make_transport, run_launcher
+from sage_robot.core import topics
 from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.clock import Clock, SimClock, WallClock
 from sage_robot.core.clock_follow import FollowerClock, publish_clock
@@ -47,6 +48,8 @@ from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
 GROUP_HEALTH_PREFIX = "/sage/group_health/"  # + group name: a group's launcher reports here
 PORT_WATCH_S = 0.1  # how often the simulator's group checks its pty link (s, its clock)
 CLOCK_MODES = ("source", "follow", "wall")
+STDIN_FD = 0  # --parent-pipe: the supervisor holds the other end of stdin
+STDIN_READ_BYTES = 4096  # nothing is ever written there: one read sees the end
 
 
 def group_health_topic(group: str) -> Topic[HealthReport]:
@@ -93,14 +96,36 @@ async def keep_port_link(ctx: NodeContext, link: Path) -> None:
         await ctx.clock.sleep(PORT_WATCH_S)
 
 
-async def run_group(ctx: NodeContext, specs: list[NodeSpec], export_port: str = "") -> Launcher:
-    """Run the group's nodes until a signal; the simulator's group also publishes ``/clock``."""
+def watch_parent(launcher: Launcher) -> None:
+    """Stop the group when the supervisor that started it is gone (even ``kill -9``): it holds
+    the other end of our stdin, which reads end-of-file then."""
+    loop = asyncio.get_running_loop()
+
+    def on_readable() -> None:
+        try:
+            data = os.read(STDIN_FD, STDIN_READ_BYTES)
+        except OSError:
+            data = b""
+        if not data:
+            loop.remove_reader(STDIN_FD)
+            launcher.request_stop()
+
+    loop.add_reader(STDIN_FD, on_readable)
+
+
+async def run_group(
+    ctx: NodeContext, specs: list[NodeSpec], export_port: str = "", parent_pipe: bool = False
+) -> Launcher:
+    """Run the group's nodes until a signal (or, with ``parent_pipe``, the supervisor's end);
+    the simulator's group also publishes ``/clock``."""
     clock = ctx.clock
     if isinstance(clock, FollowerClock):
-        return await _run_following(ctx, specs, clock)
+        return await _run_following(ctx, specs, clock, parent_pipe)
     tasks: list[Any] = []
 
-    async def after_start(_launcher: Launcher) -> None:
+    async def after_start(launcher: Launcher) -> None:
+        if parent_pipe:
+            watch_parent(launcher)
         if isinstance(clock, SimClock):
             tasks.append(publish_clock(ctx.bus, clock))
         if export_port:
@@ -113,10 +138,14 @@ async def run_group(ctx: NodeContext, specs: list[NodeSpec], export_port: str = 
             task.cancel()
 
 
-async def _run_following(ctx: NodeContext, specs: list[NodeSpec], clock: FollowerClock) -> Launcher:
+async def _run_following(
+    ctx: NodeContext, specs: list[NodeSpec], clock: FollowerClock, parent_pipe: bool
+) -> Launcher:
     sub = clock.attach(ctx.bus)
     launcher = Launcher(ctx, specs)
     launcher.install_signal_handlers()
+    if parent_pipe:
+        watch_parent(launcher)
     try:
         await launcher.start()
         await launcher._stop_event.wait()
@@ -135,6 +164,7 @@ def build_context(args: argparse.Namespace) -> tuple[NodeContext, list[NodeSpec]
     ctx = NodeContext(Bus(clock, make_transport(settings)), clock, settings)
     ctx.resources[SIM_STEP_HOOKS] = []
     ctx.resources[HEALTH_TOPIC] = group_health_topic(args.group)
+    ctx.bus.declare(topics.HEALTH, latched=True)  # the supervisor's merged report (the pages read it)
     if args.mcu_port:
         ctx.resources[PORT_RESOURCE] = args.mcu_port
     return ctx, specs
@@ -153,6 +183,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--start-time", type=float, default=0.0, help="simulated start time (s)")
     p.add_argument("--export-port", default="", help="keep a link to the simulated MCU's pty here")
     p.add_argument("--mcu-port", default="", help="the serial bridge opens this port")
+    p.add_argument("--parent-pipe", action="store_true",
+                   help="stop when stdin reaches its end (the supervisor is gone)")
     return p.parse_args(argv)
 
 
@@ -160,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
         ctx, specs = build_context(args)
-        asyncio.run(run_group(ctx, specs, args.export_port))
+        asyncio.run(run_group(ctx, specs, args.export_port, args.parent_pipe))
     except (SageError, json.JSONDecodeError) as exc:
         print(f"sage group {args.group}: {exc}", file=sys.stderr)
         return 2

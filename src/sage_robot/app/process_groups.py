@@ -81,6 +81,7 @@ class GroupProcess:
     started_at: float | None = None
     report: HealthReport | None = None
     pids: list[int] = field(default_factory=list)  # every pid it had, the current last
+    spawned: list[float] = field(default_factory=list)  # when each was started (monotonic s)
 
     @property
     def pid(self) -> int:
@@ -211,8 +212,11 @@ class GroupSupervisor:
             argv += ["--start-time", repr(self.sim_time)]  # a restarted simulator goes on from there
         g.state, g.report = NodeState.STARTING, None
         beat = heartbeat_fd() if BRIDGE_NODE in g.plan.nodes else None  # `sage up`'s last word
-        g.proc = await asyncio.create_subprocess_exec(*argv, pass_fds=(beat,) if beat is not None else ())
+        # Its stdin is a pipe nobody writes to: it reads end-of-file once this process is gone.
+        g.proc = await asyncio.create_subprocess_exec(*argv, "--parent-pipe", stdin=asyncio.subprocess.PIPE,
+                                                      pass_fds=(beat,) if beat is not None else ())
         g.pids.append(g.proc.pid)
+        g.spawned.append(time.monotonic())
         self.log.info("process group started", group=g.plan.name, pid=g.proc.pid)
         self._publish_health()
         return await g.proc.wait()

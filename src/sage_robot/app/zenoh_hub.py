@@ -18,7 +18,7 @@ from typing import Any
 
 from sage_robot.core.errors import SageError
 from sage_robot.core.transport import wire
-from sage_robot.core.transport.keys import open_session, topic_key
+from sage_robot.core.transport.keys import kind_key, open_session, topic_key
 
 _log = logging.getLogger("sage.process_groups.hub")
 
@@ -39,7 +39,10 @@ class ZenohHub:
         except zenoh.ZError as exc:
             raise SageError(f"process groups: bad endpoint {endpoint!r}: {exc}") from None
         self.session = open_session(cfg, "process groups")
-        self._declared: list[Any] = []
+        self._last: dict[str, bytes] = {}  # topic -> the last frame published here
+        # Tools ask the last message of a topic (`sage status` reads /sage/health so).
+        last = self.session.declare_queryable(kind_key(robot_id, "last"), self._on_last)
+        self._declared: list[Any] = [last]
         self.rejected = 0  # frames that did not decode
 
     def subscribe(self, topic: str, callback: Callable[[Any], None]) -> None:
@@ -59,7 +62,17 @@ class ZenohHub:
         self._declared.append(self.session.declare_subscriber(topic_key(self.robot, topic), on_sample))
 
     def publish(self, topic: str, msg: Any) -> None:
-        self.session.put(topic_key(self.robot, topic), wire.encode(msg))
+        frame = wire.encode(msg)
+        self._last[topic] = frame
+        self.session.put(topic_key(self.robot, topic), frame)
+
+    def _on_last(self, query: Any) -> None:  # Zenoh's thread
+        import zenoh
+
+        for topic, frame in list(self._last.items()):
+            key = kind_key(self.robot, "last", topic[1:])
+            if query.key_expr.intersects(zenoh.KeyExpr(key)):
+                query.reply(key, frame)
 
     def close(self) -> None:
         for decl in self._declared:

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 SCAN_BEAMS = 360  # a LaserScan like the RPLIDAR A1's
+IN_PROCESS_MESSAGES = 20000  # the in-process case with the Zenoh transport attached
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,10 +26,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-async def _case(make: Any, n_subs: int, n_msgs: int) -> dict[str, float]:
+async def _case(make: Any, n_subs: int, n_msgs: int, transport: Any = None) -> dict[str, float]:
     from sage_robot.core.bus import Bus
 
-    bus = Bus()
+    bus = Bus(transport=transport)
     latencies: list[float] = []
     done = asyncio.Event()
     received = 0
@@ -92,11 +93,22 @@ def _zenoh_cases(scale: float) -> list[dict[str, Any]] | str:
 
         raise SageError(f"--zenoh-scale must be > 0, got {scale:g}")
     try:
-        from sage_robot.bench.bus_zenoh import default_cases, run_cases
-        from sage_robot.core.transport.zenoh_bus import ZenohTransport  # noqa: F401  (installed?)
+        from sage_robot.bench.bus_zenoh import default_cases, run_cases, settings_for
+        from sage_robot.core.transport.zenoh_bus import ZenohTransport
     except ImportError as exc:
         return f"skipped: {exc} (pip install 'sage-robot[zenoh]')"
-    return run_cases(default_cases(scale))
+    from sage_robot.core.msgs import Twist
+
+    # In-process delivery with the Zenoh transport attached and no remote subscriber: what
+    # every node pays once `bus.transport: zenoh` is on.
+    transport = ZenohTransport(settings_for("benchlocal", [], []))
+    n_msgs = max(10, int(IN_PROCESS_MESSAGES * scale))
+    try:
+        local = asyncio.run(_case(lambda t: _Stamped(t, Twist(0.3, 0.1)), 1, n_msgs, transport))
+    finally:
+        transport.close()
+    in_process = {"message": "small", "transport": "zenoh attached, in-process subscriber", **local}
+    return [in_process, *run_cases(default_cases(scale))]
 
 
 class _Stamped:

@@ -65,7 +65,7 @@ def _free_port() -> int:
         return port
 
 
-def _settings(robot: str, listen: list[str], connect: list[str]) -> Any:
+def settings_for(robot: str, listen: list[str], connect: list[str]) -> Any:
     from sage_robot.core.config.bus import BusSettings, ZenohSettings
 
     return BusSettings(
@@ -115,7 +115,7 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
     from sage_robot.core.transport.zenoh_bus import ZenohTransport
 
     port = _free_port()
-    transport = ZenohTransport(_settings(robot, [f"tcp/127.0.0.1:{port}"], []))
+    transport = ZenohTransport(settings_for(robot, [f"tcp/127.0.0.1:{port}"], []))
     bus = Bus(WallClock(), transport)
     latencies: list[float] = []
     times: list[float] = []  # first and last arrival
@@ -198,7 +198,7 @@ async def _publish(robot: str, port: int, kind: str, messages: int, rate_hz: flo
     from sage_robot.core.clock import WallClock
     from sage_robot.core.transport.zenoh_bus import ZenohTransport
 
-    transport = ZenohTransport(_settings(robot, [], [f"tcp/127.0.0.1:{port}"]))
+    transport = ZenohTransport(settings_for(robot, [], [f"tcp/127.0.0.1:{port}"]))
     bus = Bus(WallClock(), transport)
     make = _message_maker(kind)
     try:

@@ -45,6 +45,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--mode", default="sim", help="profile to run while recording (sim, tour, slam)")
     p.add_argument("--duration", type=float, help="stop after this many seconds (of the run's clock)")
     p.add_argument("--fast", action="store_true", help="simulation as fast as possible")
+    p.add_argument(
+        "--attach",
+        action="store_true",
+        help="record a robot that is already running (bus.transport: zenoh) instead of starting one",
+    )
+    p.add_argument("--connect", action="append", help="with --attach: robot endpoint (repeatable)")
     p.set_defaults(func=run_record)
 
     p = sub.add_parser("replay", help="feed an MCAP recording back onto the bus (with web and Foxglove)")
@@ -81,6 +87,8 @@ def run_record(args: argparse.Namespace) -> int:
     from sage_robot.app.runtime import make_context, run_launcher, specs_for
     from sage_robot.core.config import load_profile
 
+    if args.attach:
+        return record_attached(args)
     over = {"sim": {"speed": None}} if args.fast else None
     settings = load_profile(args.profile, over)
     ctx = make_context(settings, simulated=args.mode.startswith("sim"))
@@ -88,6 +96,49 @@ def run_record(args: argparse.Namespace) -> int:
     if args.topics:
         ctx.resources[RECORD_TOPICS] = args.topics
     launcher = asyncio.run(run_launcher(ctx, specs_for(args.mode, ["recorder"]), until=args.duration))
+    counts = launcher.health_report().get("recorder", {}).get("stats", {})
+    print(f"wrote {args.out}: {json.dumps(counts)}")
+    return 0
+
+
+def record_attached(args: argparse.Namespace) -> int:
+    """`sage record OUT --attach`: the recorder node on a bus that only listens to the running
+    robot over Zenoh, for ``--duration`` wall seconds or until Ctrl-C."""
+    from sage_robot.app.launcher import NodeSpec
+    from sage_robot.app.recording.nodes import RECORD_PATH, RECORD_TOPICS
+    from sage_robot.app.registry import node_class
+    from sage_robot.app.runtime import run_launcher
+    from sage_robot.core.bus import Bus
+    from sage_robot.core.clock import WallClock
+    from sage_robot.core.config import load_profile
+    from sage_robot.core.node import NodeContext
+
+    try:
+        from sage_robot.core.transport.remote import RemoteRobot, ZenohListener
+    except ImportError as exc:
+        raise SageError(f"--attach needs the zenoh extra (pip install 'sage-robot[zenoh]'): {exc}") from None
+    if args.duration is not None and args.duration <= 0:
+        raise SageError(f"--duration must be > 0 s, got {args.duration:g}")
+    settings = load_profile(args.profile)
+    topics = list(args.topics or settings.ops.record_topics)
+    robot = RemoteRobot(settings.bus, args.connect)
+    try:
+        robot.require_connected()
+        transport = ZenohListener(robot, topics)
+    except SageError:
+        robot.close()
+        raise
+    clock = WallClock()
+    ctx = NodeContext(Bus(clock, transport), clock, settings)
+    ctx.resources[RECORD_PATH] = Path(args.out)
+    ctx.resources[RECORD_TOPICS] = topics
+
+    async def stop_later(launcher: Any) -> None:
+        if args.duration is not None:
+            asyncio.get_running_loop().call_later(args.duration, launcher.request_stop)
+
+    specs = [NodeSpec("recorder", node_class("recorder"))]
+    launcher = asyncio.run(run_launcher(ctx, specs, after_start=stop_later))
     counts = launcher.health_report().get("recorder", {}).get("stats", {})
     print(f"wrote {args.out}: {json.dumps(counts)}")
     return 0

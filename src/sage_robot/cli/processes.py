@@ -32,16 +32,29 @@ def wants_processes(args: argparse.Namespace) -> bool:
 
 
 def run_as_processes(
-    args: argparse.Namespace, settings: Settings, mode: str, specs: list[Any], overrides: dict[str, Any]
+    args: argparse.Namespace,
+    settings: Settings,
+    mode: str,
+    specs: list[Any],
+    overrides: dict[str, Any],
+    pages: list[str] | None = None,
 ) -> int:
-    """Run ``specs`` (the one-process run's node specs) as process groups until Ctrl-C."""
-    from sage_robot.app.process_groups import run_processes
+    """Run ``specs`` (the one-process run's node specs) as process groups until Ctrl-C;
+    ``pages``: the web pages' addresses, printed at the start."""
+    from sage_robot.app.process_groups import hub_endpoints, run_processes
+    from sage_robot.core.config.processes import group_of
 
     given = [f"--{f}" for f in ONE_RUN_FLAGS if getattr(args, f, None)]
     if given:
-        raise ConfigError(f"--processes runs until Ctrl-C: {', '.join(given)} need one process "
-                          "(leave out --processes)")
+        raise ConfigError(f"--processes runs until Ctrl-C and prints no summary: leave it out for "
+                          f"{', '.join(given)}")
     nodes = [(s.name, s.critical) for s in specs]
+    groups = group_of(settings.processes.groups, [n for n, _ in nodes])
+    print(f"SAGE {mode}: {len(groups)} process groups on Zenoh {hub_endpoints(settings)[0]}; Ctrl-C to stop")
+    for name, members in groups.items():
+        print(f"  {name}: {', '.join(members)}")
+    if pages:
+        print("web pages:\n" + "\n".join(f"  {url}" for url in pages))
     supervisor = run_processes(settings, mode, nodes, getattr(args, "profile", None), overrides)
     restarted = sorted(g for g, p in supervisor.groups.items() if p.restarts)
     print(f"process groups restarted: {', '.join(restarted) or 'none'}")

@@ -136,8 +136,9 @@ def run_sim(args: argparse.Namespace) -> int:
         raise ConfigError(f"--duration must be > 0 s, got {duration}")
     if wants_processes(args):  # each process group in its own process (cli/processes.py)
         extra = ros2_specs("sim") if getattr(args, "ros2", False) else []
-        return run_as_processes(args, settings, "sim", sim_specs(args.headless, args.nodes) + extra,
-                                _overrides(args, scenario))
+        specs = sim_specs(args.headless, args.nodes) + extra
+        pages = web_addresses(settings) if WEB_NODE in {s.name for s in specs} else None
+        return run_as_processes(args, settings, "sim", specs, _overrides(args, scenario), pages)
     ctx = make_context(settings, simulated=True)
     if scenario is not None:
         ctx.resources[SCENARIO_RESOURCE] = scenario

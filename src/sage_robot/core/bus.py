@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import contextvars
+import functools
 import inspect
 import logging
 import threading
@@ -87,6 +88,18 @@ class Transport(ABC):
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release sockets; the default transport has none."""
+
+    # Services beyond the process (optional): the bus offers each local service and asks the
+    # transport for a service no local node offers.
+    def offer(self, name: str, call: Callable[[Any], Awaitable[Any]]) -> None:  # noqa: B027
+        """A local service that other processes may call (``call(request)`` → reply)."""
+
+    def withdraw(self, name: str) -> None:  # noqa: B027
+        """The local service is gone."""
+
+    async def call(self, name: str, request: Any, timeout: float | None) -> Any:
+        """Call a service of another process; the default knows none."""
+        raise ServiceUnavailable(f"no node offers the service {name}")
 
 
 class LocalTransport(Transport):
@@ -354,9 +367,11 @@ class Bus:
         if name in self._services:
             raise ValueError(f"service {name} is already offered")
         self._services[name] = ServiceInfo(name, handler)
+        self.transport.offer(name, functools.partial(self.call, name))
 
     def unserve(self, name: str) -> None:
-        self._services.pop(name, None)
+        if self._services.pop(name, None) is not None:
+            self.transport.withdraw(name)
 
     def has_service(self, name: str) -> bool:
         return name in self._services
@@ -364,8 +379,8 @@ class Bus:
     async def call(self, name: str, request: Any, timeout: float | None = DEFAULT_SERVICE_TIMEOUT_S) -> Any:
         """Call a service; errors and time-outs raise :class:`ServiceError` subclasses."""
         info = self._services.get(name)
-        if info is None:
-            raise ServiceUnavailable(f"no node offers the service {name}")
+        if info is None:  # another process's, or nobody's (ServiceUnavailable)
+            return await self.transport.call(name, request, timeout)
         info.calls += 1
         try:
             return await self.clock.wait_for(info.handler(request), timeout)

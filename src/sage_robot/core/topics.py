@@ -57,6 +57,7 @@ ESTOP = Topic("/sage/estop", EStopState)  # latched: the operator's latching e-s
 MCU_STATUS = Topic("/mcu/status", DiagnosticStatus)  # serial link state and statistics
 NAV_STATE = Topic("/nav/state", NavigateFeedback)  # the navigator's state whoever sent the goal
 #   (published on every change and at 1 Hz while a goal runs; IDLE when none)
+COSTMAP = Topic("/nav/costmap", OccupancyGrid)  # latched: the local costmap (1 Hz), the teleop map's layer
 LOC_HEALTH = Topic("/localization/health", LocalizationHealth)
 MAP_ODOM = Topic("/localization/map_odom", PoseStamped)  # pose of the odom frame in the map (map->odom)
 TOUR_STATE = Topic("/sage/tour", TourState)  # latched: the visitor's tour (brain's tour node)

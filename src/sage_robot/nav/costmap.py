@@ -382,6 +382,14 @@ class Costmap:
             return 0.0
         return float(self.dist[int(r), int(c)])
 
+    def wall_distance(self, xy: np.ndarray) -> np.ndarray:
+        """Distance (m) from (N, 2) points to the map's walls (static and keepout, no scan marks)."""
+        r, c = self.geom.to_cell(xy[:, 0], xy[:, 1])
+        ok = self.geom.inside(r, c)
+        out = np.zeros(len(xy), dtype=np.float32)  # outside the grid counts as a wall
+        out[ok] = self._base_dist[r[ok], c[ok]]
+        return out
+
     def speed_limit_at(self, x: float, y: float) -> float:
         """Speed-limit fraction (0..1] at a point; 1 = no limit."""
         r, c = self.geom.to_cell(x, y)

@@ -51,6 +51,7 @@ from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.nav import NavigateFeedback, NavigateResult, NavState
 from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_heading
 from sage_robot.nav.planner import PATH_SPACING_M, NoPath, Plan, path_blocked, plan
+from sage_robot.nav.social_drive import GROUP_EVENT_WITHIN_M, Social, group_near, keep_right_plan
 
 if TYPE_CHECKING:
     from sage_robot.nav.costmap import Costmap
@@ -126,6 +127,7 @@ class GoalRun:
         self._first_blockers: np.ndarray | None = None  # what blocked the path at the wait's first look
         self._blocker_moved = False  # ... and whether it has moved since
         self._blocker_sizes: list[float] = []  # sizes (m) of the blobs on the path at the latest look
+        self.social = Social(node, self.params, self.dt)  # people: slow down, keep right, pull over
 
     # ------------------------------------------------------------ small steps
     def feedback(self, state: NavState) -> None:
@@ -154,13 +156,14 @@ class GoalRun:
         node, start = self.node, self.pose()
         goal = self.target.pose[:2]
         scan = node.scan  # the job's inputs are taken here, not read from the node in the thread
+        tracks = self.social.snapshot()
 
         def work() -> Plan:
             cm = node.global_cm
             if with_obstacles:
                 node.refresh_global(start, scan)
                 try:
-                    return plan(cm, start[:2], goal)
+                    return self.social.plan(cm, start[:2], goal, tracks)
                 except NoPath:
                     if not cm.blocked(np.array([goal]))[0]:
                         raise
@@ -173,7 +176,7 @@ class GoalRun:
             else:
                 cm.clear_obstacles()
             try:
-                return plan(cm, start[:2], goal)
+                return keep_right_plan(plan(cm, start[:2], goal), cm)
             finally:
                 cm.obstacles[:] = saved
                 cm.refresh()
@@ -182,6 +185,8 @@ class GoalRun:
             result = await self.clock.offload(work, latency_s=PLAN_LATENCY_S)
         except NoPath as exc:
             raise Blocked(str(exc)) from None
+        if with_obstacles and group_near(start, tracks, GROUP_EVENT_WITHIN_M):
+            self.social.say("passing_group", "going around the group, not through it")
         node.publish_plan(result.points)
         return result
 
@@ -233,6 +238,11 @@ class GoalRun:
                     return
                 if cmd.blocked:
                     raise Blocked("an obstacle is in the way")
+                self.social.observe()
+                if self.social.pull_over_due(pose):  # a crowd head-on in a narrow corridor
+                    await self.social.pull_over(self.feedback)
+                    continue
+                cmd = self.social.regulate(cmd, pose)
                 self.node.command(cmd.v, cmd.w)
                 self.remaining = ctl.remaining_m()
                 if replan is not None and replan.done():

@@ -19,7 +19,7 @@ import numpy as np
 from sage_robot.core import topics
 from sage_robot.core.actions import ActionAborted, GoalContext, GoalTimeout
 from sage_robot.core.geometry import compose
-from sage_robot.core.msgs import Event, LaserScan, Odometry, Pose2D, PoseStamped, Text, Twist
+from sage_robot.core.msgs import Event, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseStamped, Text, Twist
 from sage_robot.core.msgs import Path as PathMsg
 from sage_robot.core.msgs.nav import (
     LocalizationHealth,
@@ -34,6 +34,7 @@ from sage_robot.core.msgs.nav import (
 from sage_robot.core.node import Node
 from sage_robot.core.places import Place
 from sage_robot.nav.costmap import Costmap
+from sage_robot.nav.costmap_msg import costmap_grid
 from sage_robot.nav.drive import GoalRun, Target
 from sage_robot.nav.mapdata import load_for, places_after
 
@@ -41,6 +42,7 @@ Pose = tuple[float, float, float]
 
 GLOBAL_OBSTACLE_MEMORY_M = 12.0  # scan obstacles further than this from the robot are forgotten
 STATE_PERIOD_S = 1.0  # NAV_STATE is repeated this often while a goal or tour runs (s)
+COSTMAP_PERIOD_S = 1.0  # the local costmap is published this often for the operator's map (s)
 IDLE = NavigateFeedback(NavState.IDLE)
 
 
@@ -69,6 +71,8 @@ class NavigatorNode(Node):
         self.bus.declare(topics.NAV_STATE, NavigateFeedback, latched=True)
         self.bus.publish(topics.NAV_STATE, self.state)
         self.every(STATE_PERIOD_S, self._repeat_state, "navigator.state")
+        self.bus.declare(topics.COSTMAP, OccupancyGrid, latched=True)
+        self.every(COSTMAP_PERIOD_S, self._publish_costmap, "navigator.costmap")
         self.bus.actions.serve(topics.NAVIGATE_TO, self._navigate)
         self.bus.actions.serve(topics.TOUR, self._tour)
         self.bus.serve(topics.CANCEL_NAV, self._cancel)
@@ -143,6 +147,10 @@ class NavigatorNode(Node):
     def _repeat_state(self) -> None:
         if self.state.state is not NavState.IDLE or self._busy():
             self.bus.publish(topics.NAV_STATE, self.state)
+
+    def _publish_costmap(self) -> None:
+        if self.local_cm is not None:  # drawn on the teleop map (web: /ws/live "costmap")
+            self.bus.publish(topics.COSTMAP, costmap_grid(self.local_cm, self.clock.now()))
 
     def publish_plan(self, points: np.ndarray) -> None:
         poses = tuple(Pose2D(float(x), float(y), 0.0) for x, y in points[::4])

@@ -43,6 +43,7 @@ PEOPLE_HZ = 10.0
 WATCHDOG_S = 0.55  # as the MCU firmware: a command older than this stops the body
 CMD_RESEND_S = 0.05  # a scenario's standing /cmd_vel is re-sent at 20 Hz
 EVENT_SOURCE = "sim"
+EXCUSE_ME_EVENT = "blocked_by_people"  # the navigator's "excuse me, may I pass?"
 
 
 class WorldNode(Node):
@@ -262,7 +263,11 @@ class WorldNode(Node):
         self.bus.publish(topics.SAY, Text(sentence))
 
     def _on_event(self, ev: Event) -> None:
-        """Arrivals (the navigator's events) go into the summary, whoever sent the goal."""
+        """Arrivals (the navigator's events) go into the summary, whoever sent the goal; the
+        robot's "excuse me" (``blocked_by_people``) is heard by the people in front of it."""
+        if ev.kind == EXCUSE_ME_EVENT:
+            moved = self.world.ask_aside()
+            self.log.info("excuse me heard", stepping_aside=moved)
         if ev.kind == "arrived":
             place = ev.data.get("place", "")
             self.summary.setdefault("arrivals", []).append(

@@ -165,6 +165,8 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
             seed=sim.seed,
             raycaster=raycaster,
             track_width_m=settings.robot.track_width_m,
+            people_model=sim.people_model,
+            ignore_share=sim.people_ignore_share,
         )
     except ValueError as exc:
         raise ConfigError(f"{map_path}: {exc}") from None

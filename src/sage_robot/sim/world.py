@@ -23,12 +23,14 @@ import numpy as np
 from sage_robot.core.msgs import CompressedImage, LaserScan, OccupancyGrid
 from sage_robot.core.msgs.sim import LowObstacle, People, Person, SpeakerBearing, bearing_to_doa_deg
 from sage_robot.sim.camera import Camera, Scene, encode_jpeg
+from sage_robot.sim.crowd import aside_spot, asked_people, make_crowd, person_fits
 from sage_robot.sim.lidar import Lidar, LidarSpec
-from sage_robot.sim.people import PERSON_RADIUS_M, Crowd, Lanes, PersonState
+from sage_robot.sim.people import PERSON_RADIUS_M, Lanes, PersonState
 from sage_robot.sim.raycast import GridRaycaster
 
 SPEAKER_RANGE_M = 3.0  # the nearest person within this distance is "the speaker"
 TURN_EPS_RADPS = 1e-9
+IGNORE_STREAM = 3  # SeedSequence child for who ignores "excuse me" (0, 1: world; 2: spawning)
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,8 @@ class World:
         seed: int = 7,
         raycaster: GridRaycaster | None = None,
         track_width_m: float = 0.381,
+        people_model: str = "simple",
+        ignore_share: float = 0.0,
     ) -> None:
         self.grid = grid
         self.raycaster = raycaster or GridRaycaster(grid)
@@ -76,8 +80,13 @@ class World:
         self._box_reach = [
             (float(b[0]), float(b[1]), 0.5 * math.hypot(b[2], b[3]) + robot_radius) for b in self._boxes
         ]
-        self.crowd = Crowd(
-            list(people or []), lanes, self.raycaster.clearance_at, self.rng_people, self.line_of_sight
+        if not 0.0 <= ignore_share <= 1.0:
+            raise ValueError(f"the share of people who ignore the robot must be 0..1, got {ignore_share}")
+        self.ignore_share = ignore_share
+        self.rng_ignore = np.random.default_rng(np.random.SeedSequence(seed).spawn(IGNORE_STREAM + 1)[-1])
+        self.crowd = make_crowd(
+            people_model, list(people or []), lanes, self.raycaster.clearance_at, self.rng_people,
+            self.line_of_sight, grid=grid, start=start, robot_radius=robot_radius,
         )
         self.crowd.is_free = self.raycaster.is_free
         self._camera: Camera | None = None
@@ -163,6 +172,21 @@ class World:
         self.crowd.robot_speed = abs(self.v)
         self.crowd.step(dt, self.t, self.pose, self.robot_radius)
         self.t += dt
+
+    def ask_aside(self) -> list[int]:
+        """The robot said "excuse me": people in front of it step out of its way (a seeded
+        ``ignore_share`` of them, decided once per person, stay put; so does someone with
+        nowhere to go). Returns the ids of those who move."""
+        fits = person_fits(self.raycaster.clearance_at, self.raycaster.is_free)
+        moving = []
+        for p in asked_people(self.crowd.people, self.pose):
+            if p.ignores is None:
+                p.ignores = bool(self.rng_ignore.random() < self.ignore_share)
+            spot = None if p.ignores else aside_spot(p, self.pose, self.robot_radius, fits)
+            if spot is not None:
+                self.crowd.send_aside(p, spot)
+                moving.append(p.id)
+        return moving
 
     def people_msg(self, stamp: float) -> People:
         return People(

@@ -44,6 +44,7 @@ from sage_robot.core.msgs.tour import TourState
 from sage_robot.core.msgs.voice import AudioChunk, Doa, Phase, UiState
 from sage_robot.core.node import Node
 from sage_robot.web import views
+from sage_robot.web.costmap_view import costmap_json
 from sage_robot.web.navstate import NavTracker
 from sage_robot.web.tour_api import tour_json
 
@@ -60,6 +61,7 @@ MIN_INTERVAL_S: dict[str, float] = {
     "people": 0.2,
     "loc": 0.5,
     "map": 1.0,  # SLAM grows the map; re-send at most once a second
+    "costmap": 1.0,  # the navigator's local costmap (the teleop map's optional layer)
     "estop": 0.0,
     "teleop": 0.0,
     "nav": 0.2,
@@ -133,6 +135,7 @@ class Hub:
         sub(topics.PLAN, Path, self._on_plan)
         sub(topics.GOAL_POSE, PoseStamped, self._on_goal)
         sub(topics.MAP, OccupancyGrid, self._on_map, maxsize=2)
+        sub(topics.COSTMAP, OccupancyGrid, lambda m: self.set("costmap", costmap_json(m)), maxsize=1)
         self.nav.start()
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
         sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)

@@ -36,7 +36,7 @@ POLICY_VIOLATION = 1008  # WebSocket close code: refused (origin or login)
 STATUS_CHANNELS = ("battery", "ui_state", "ui_state_seed", "estop", "nav", "captions", "tour")
 LIVE_CHANNELS = (
     "map", "pose", "odom", "scan", "plan", "goal", "people", "loc", "nav", "estop", "teleop",
-    "battery", "ui_state", "events",
+    "battery", "ui_state", "events", "costmap",
 )  # fmt: skip
 
 _log = get_logger("web")

@@ -23,6 +23,13 @@ class SimSettings(Section):
     camera_hz: float = Field(
         15.0, ge=0, description="Camera frames per second of wall time (0 = no camera)."
     )
+    people_model: Literal["auto", "jupedsim", "simple"] = Field(
+        "simple", description="Pedestrian model: 'jupedsim' (optional extra 'people'), 'simple' (the "
+                              "hand-written walkers) or 'auto' (jupedsim when installed)."
+    )
+    people_ignore_share: float = Field(
+        0.2, ge=0, le=1, description="Share of simulated people who do not step aside when asked (0..1)."
+    )
 
 
 class NavSettings(Section):

@@ -8,7 +8,7 @@ from pydantic import Field
 
 from sage_robot.core.config.base import Section
 
-DEFAULT_ZENOH_PORT = 7447  # Zenoh's customary TCP port
+DEFAULT_ZENOH_PORT = 7450  # not 7447: Zenoh's router port (rmw_zenohd, the ROS 2 bridge's default)
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"  # one Zenoh key chunk, no wildcards
 
 

@@ -11,8 +11,11 @@ Keys (``<robot>`` is ``bus.robot_id``; a topic name loses its leading slash)::
 
 from __future__ import annotations
 
+import atexit
 import json
 import re
+import threading
+from pathlib import Path
 from typing import Any
 
 from sage_robot.core.config.bus import ZenohSettings
@@ -59,31 +62,61 @@ def tool_endpoints(z: ZenohSettings) -> list[str]:
     return [ANY_ADDRESS.sub("/127.0.0.1:", e) for e in z.listen]
 
 
-def session_config(z: ZenohSettings, listen: list[str], connect: list[str]) -> Any:
-    """A ``zenoh.Config``: ``config_file`` first, then mode, scouting and endpoints."""
+def session_config(z: ZenohSettings, listen: list[str] | None, connect: list[str] | None) -> Any:
+    """A ``zenoh.Config``: ``config_file`` first, then the profile's keys over it (with a file,
+    only those the profile sets). ``listen``/``connect`` given here override both (a tool
+    listens nowhere and connects to the robot)."""
     import zenoh
 
+    if z.config_file and not Path(z.config_file).is_file():
+        raise ConfigError(f"bus.zenoh.config_file: {z.config_file} not found")
+    explicit = z.model_fields_set if z.config_file else set(type(z).model_fields)
+    keys: dict[str, Any] = {}
+    if "mode" in explicit:
+        keys["mode"] = z.mode
+    if "multicast_scouting" in explicit:
+        keys["scouting/multicast/enabled"] = z.multicast_scouting
+    if listen is not None or "listen" in explicit:
+        keys["listen/endpoints"] = list(z.listen) if listen is None else listen
+    if connect is not None or "connect" in explicit:
+        keys["connect/endpoints"] = list(z.connect) if connect is None else connect
     try:
         cfg = zenoh.Config.from_file(z.config_file) if z.config_file else zenoh.Config()
-        cfg.insert_json5("mode", json.dumps(z.mode))
-        cfg.insert_json5("scouting/multicast/enabled", json.dumps(z.multicast_scouting))
-        if listen or not z.config_file:
-            cfg.insert_json5("listen/endpoints", json.dumps(listen))
-        if connect or not z.config_file:
-            cfg.insert_json5("connect/endpoints", json.dumps(connect))
+        for key, value in keys.items():
+            cfg.insert_json5(key, json.dumps(value))
     except (zenoh.ZError, OSError) as exc:
         raise ConfigError(f"bus.zenoh: {_one_line(exc)}") from None
     return cfg
 
 
 def open_session(cfg: Any, what: str) -> Any:
-    """``zenoh.open`` with a one-line error (a port in use, a bad endpoint, a TLS file)."""
+    """``zenoh.open`` with a one-line error (a port in use, a bad endpoint, a TLS file). The
+    session is closed at exit if its owner did not close it."""
     import zenoh
 
     try:
-        return zenoh.open(cfg)
+        session = zenoh.open(cfg)
     except zenoh.ZError as exc:
         raise SageError(f"{what}: cannot open the Zenoh session: {_one_line(exc)}") from None
+    _close_at_exit(session)
+    return session
+
+
+def _close_at_exit(session: Any) -> None:
+    """Zenoh's callback threads are non-daemon Python threads: the interpreter waits for them
+    *before* ``atexit`` handlers run, so a session left open hangs the exit.
+    ``threading._register_atexit`` runs first (``concurrent.futures`` uses it for the same
+    reason)."""
+
+    def close() -> None:
+        if not session.is_closed():
+            session.close()
+
+    register = getattr(threading, "_register_atexit", None)
+    if register is None:  # pragma: no cover - CPython >= 3.9 has it
+        atexit.register(close)
+    else:
+        register(close)
 
 
 def _one_line(exc: BaseException) -> str:

@@ -8,10 +8,12 @@ session.
 from __future__ import annotations
 
 import json
+import logging
 import time
 from collections.abc import Callable
 from typing import Any
 
+from sage_robot.core.bus import Transport
 from sage_robot.core.config.bus import BusSettings
 from sage_robot.core.errors import SageError
 from sage_robot.core.transport import wire
@@ -26,6 +28,8 @@ from sage_robot.core.transport.keys import (
 )
 
 POLL_S = 0.01  # how often a bounded wait looks again
+
+_log = logging.getLogger("sage.bus.zenoh")
 
 
 class RobotUnreachable(SageError):
@@ -133,9 +137,9 @@ class RemoteRobot:
     def subscribe(
         self, topic: str, on_msg: Callable[[str, Any], None], on_error: Callable[[str], None]
     ) -> None:
-        """Call ``on_msg(topic, msg)`` on Zenoh's thread for each message on ``topic`` (a name
-        or ``/**`` for every topic); a frame that does not decode goes to ``on_error``."""
-        key = kind_key(self.robot, "topic") if topic == "/**" else topic_key(self.robot, topic)
+        """Call ``on_msg(topic, msg)`` on Zenoh's thread for each message on ``topic``; a frame
+        that does not decode goes to ``on_error``."""
+        key = topic_key(self.robot, topic)
 
         def handler(sample: Any) -> None:
             name = topic_of(self.robot, "topic", str(sample.key_expr)) or str(sample.key_expr)
@@ -171,3 +175,29 @@ class RawPublisher:
                 return False
             time.sleep(POLL_S)
         return True
+
+
+class ZenohListener(Transport):
+    """A receive-only transport for a bus that watches a running robot (`sage record
+    --attach`): the robot's publications on ``topics`` come in; nothing published in this
+    process leaves it (its launcher's health stays here)."""
+
+    def __init__(self, robot: RemoteRobot, topics: list[str]) -> None:
+        self.robot = robot
+        self.topics = [check_topic(t) for t in topics]
+        self.bad_frames = 0
+
+    def attach(self, deliver: Callable[[str, Any], None]) -> None:
+        for topic in self.topics:
+            self.robot.subscribe(topic, deliver, self._bad_frame)
+
+    def _bad_frame(self, why: str) -> None:
+        self.bad_frames += 1
+        if self.bad_frames == 1:
+            _log.warning("bad frame dropped: %s", why)
+
+    def send(self, topic: str, msg: Any) -> None:
+        return None
+
+    def close(self) -> None:
+        self.robot.close()

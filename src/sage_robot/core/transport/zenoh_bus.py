@@ -14,7 +14,7 @@ publication, checked against the operator password; `sage topic pub`).
 
 from __future__ import annotations
 
-import atexit
+import contextlib
 import hmac
 import json
 import logging
@@ -36,10 +36,9 @@ from sage_robot.core.transport.keys import (
     topic_key,
     topic_of,
 )
+from sage_robot.core.transport.services import Call, ZenohServices
 
 _log = logging.getLogger("sage.bus.zenoh")
-
-OperatorCheck = Callable[[str], bool]  # the operator password is right
 
 
 class ZenohTransport(Transport):
@@ -48,13 +47,15 @@ class ZenohTransport(Transport):
     def __init__(self, settings: BusSettings, operator_password: Callable[[], str] | None = None) -> None:
         self.robot = settings.robot_id
         z = settings.zenoh
-        self.session = open_session(session_config(z, list(z.listen), list(z.connect)), "bus")
+        self.session = open_session(session_config(z, None, None), "bus")
         self.zid = str(self.session.zid())
+        self.services = ZenohServices(self.session, self.robot)
         self._operator_password = operator_password
         self._deliver: Callable[[str, Any], None] | None = None
         self._publishers: dict[str, Any] = {}
         self._matched: dict[str, bool] = {}
         self._local_only: set[str] = set()  # topics whose messages cannot be encoded
+        self._warned: set[str] = set()  # topics a bad frame came in on
         self._last: dict[str, Any] = {}
         self._counts: dict[str, int] = {}
         self._declared: list[Any] = []
@@ -63,7 +64,6 @@ class ZenohTransport(Transport):
         self.received = 0
         self.rejected = 0  # frames that did not decode, refused publications
         self.closed = False
-        atexit.register(self.close)  # a session left open can hang the interpreter's exit
 
     # ------------------------------------------------------------ Transport
     def attach(self, deliver: Callable[[str, Any], None]) -> None:
@@ -98,6 +98,15 @@ class ZenohTransport(Transport):
         pub.put(frame)
         self.sent += 1
 
+    def offer(self, name: str, call: Call) -> None:
+        self.services.offer(name, call)
+
+    def withdraw(self, name: str) -> None:
+        self.services.withdraw(name)
+
+    async def call(self, name: str, request: Any, timeout: float | None) -> Any:
+        return await self.services.call(name, request, timeout)
+
     def matched(self, topic: str) -> bool:
         """Whether another process subscribes to ``topic`` (known once it was published here)."""
         return bool(self._matched.get(topic))
@@ -107,12 +116,13 @@ class ZenohTransport(Transport):
             if self.closed:
                 return
             self.closed = True
+        self.services.close()
         for decl in [*self._declared, *self._publishers.values()]:
-            decl.undeclare()
+            with contextlib.suppress(zenoh.ZError):  # the session closed at exit already
+                decl.undeclare()
         self._declared.clear()
         self._publishers.clear()
         self.session.close()
-        atexit.unregister(self.close)
 
     # ------------------------------------------------------------ publishing
     def _declare_publisher(self, topic: str) -> Any:
@@ -144,7 +154,9 @@ class ZenohTransport(Transport):
             msg = wire.decode(sample.payload.to_bytes())
         except wire.WireError as exc:
             self.rejected += 1
-            _log.warning("bad frame on %s dropped: %s", topic, exc)
+            if topic not in self._warned:  # once per topic: a broken peer must not flood the log
+                self._warned.add(topic)
+                _log.warning("bad frame on %s dropped (counted from now on): %s", topic, exc)
             return
         self.received += 1
         self._deliver(topic, msg)
@@ -160,8 +172,12 @@ class ZenohTransport(Transport):
         wanted = query.key_expr
         for topic, msg in list(self._last.items()):
             key = kind_key(self.robot, "last", topic[1:])
-            if topic not in self._local_only and wanted.intersects(zenoh.KeyExpr(key)):
+            if topic in self._local_only or not wanted.intersects(zenoh.KeyExpr(key)):
+                continue
+            try:
                 query.reply(key, wire.encode(msg))
+            except TypeError:  # not a wire message: it never leaves the process
+                continue
 
     def _on_pub(self, query: Any) -> None:
         topic = topic_of(self.robot, "pub", str(query.key_expr))

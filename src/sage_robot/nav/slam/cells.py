@@ -63,6 +63,7 @@ class CellScore:
             "cell_inside_rot": round(self.inside_rot, 3),
             "cell_inside": round(self.inside, 3),
             "cell_grid_heading_deg": [round(v, 2) for v in self.heading_range_deg],
+            "cell_grid_heading_measurements": self.heading_measurements,
         }
 
 

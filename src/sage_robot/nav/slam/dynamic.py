@@ -6,6 +6,9 @@ object* is a run of consecutive returns no wider than ``max_extent_m`` whose nei
 beams on both sides reach at least ``DEPTH_GAP_M`` farther (or return nothing): a leg, a
 chair leg, a thin post. Walls, door frames and furniture are wider or continue into their
 neighbours, and stay. Pure numpy; ranges (m) in beam order, ``inf``/out of range = no return.
+
+:func:`supported` drops points of a merged local map that only one keyframe saw in their cell
+(what moved between keyframes).
 """
 
 from __future__ import annotations
@@ -46,3 +49,18 @@ def small_foreground(
     )
     out[idx] = small[run]
     return out
+
+
+def supported(pts: np.ndarray, owner: np.ndarray, cell_m: float, need: int) -> np.ndarray:
+    """Mask of the points whose ``cell_m`` cell holds points of at least ``need`` owners (e.g.
+    keyframes: a walking person's legs are somewhere else in every keyframe)."""
+    if len(pts) == 0:
+        return np.zeros(0, dtype=bool)
+    keys = np.floor(pts / cell_m).astype(np.int64)
+    keys -= keys.min(axis=0)
+    flat = keys[:, 0] * (int(keys[:, 1].max()) + 1) + keys[:, 1]
+    cells, inverse = np.unique(flat, return_inverse=True)
+    pairs = np.unique(inverse * (int(owner.max()) + 1) + owner)
+    owners_per_cell = np.bincount(pairs // (int(owner.max()) + 1), minlength=len(cells))
+    mask: np.ndarray = owners_per_cell[inverse] >= need
+    return mask

@@ -8,7 +8,8 @@ stretches, the odometry's scale (matched distance / odometry distance) and its h
 per metre, both as decaying weighted means, and corrects odometry steps with them.
 
 A stretch counts when both of its ends were matched with the information along the direction
-of travel at least ``MIN_ISOTROPY`` of the strongest direction's, and it is at least
+of travel at least ``MIN_ISOTROPY`` of the strongest direction's (or ``MIN_ALONG_INFO``), and it
+is at least
 ``BASELINE_M`` long (the matcher's centimetre noise then weighs little). Poses (x, y m;
 theta rad).
 """
@@ -26,7 +27,9 @@ Pose = tuple[float, float, float]
 
 BASELINE_M = 2.0  # a calibration stretch is at least this long (m of odometry)
 MAX_STRETCH_TURN_RAD = 0.3  # ...and turns less than this (a turn's own scale error stays out)
-MIN_ISOTROPY = 0.25  # information along the travel / strongest direction, at both ends
+MIN_ISOTROPY = 0.25  # information along the travel / strongest direction, at both ends...
+MIN_ALONG_INFO = 25.0  # ...or at least this along the travel (1/m² per unit of one scan: with a
+# few hundred points the end is then known to about a centimetre)
 MEMORY_M = 200.0  # older stretches fade out over about this many metres
 SCALE_LIMITS = (0.8, 1.2)  # a scale outside this is not believed
 MAX_YAW_DRIFT_RAD_PER_M = 0.05
@@ -94,11 +97,12 @@ class OdometryCalibration:
         vals = np.linalg.eigvalsh(info)
         if vals[-1] <= 0:
             return False
+        need = min(MIN_ISOTROPY * vals[-1], MIN_ALONG_INFO)
         if self._anchor is None:
-            return bool(vals[0] >= MIN_ISOTROPY * vals[-1])
+            return bool(vals[0] >= need)
         d = np.array([pose[0] - self._anchor.pose[0], pose[1] - self._anchor.pose[1]])
         norm = float(np.hypot(d[0], d[1]))
         if norm < 1e-6:
-            return bool(vals[0] >= MIN_ISOTROPY * vals[-1])
+            return bool(vals[0] >= need)
         u = d / norm
-        return bool(u @ info @ u >= MIN_ISOTROPY * vals[-1])
+        return bool(u @ info @ u >= need)

@@ -4,6 +4,10 @@
 // drag -> onDrag(x, y, theta): a pose at the press point facing the release point.
 // The goal marker shows every goal, whoever set it: a pose goal from /goal_pose, a place
 // goal from /nav/state's place (drawn at that place, with its title).
+// Optional layer: the navigator's costmap (/ws/live "costmap", a small RGBA PNG), setCostmap(on).
+// Touch: two fingers pinch to zoom and pan (pinch.js).
+
+import { Pinch } from "./pinch.js";
 
 const DRAG_PX = 8; // a press that moves farther than this is a drag, not a click
 const ROBOT_RADIUS_M = 0.25;
@@ -27,12 +31,16 @@ export class LiveMap {
     this.center = null; // the world point at the canvas's centre (null: the map's centre)
     this.follow = false; // keep the robot at the centre
     this.panMode = false; // a drag moves the map instead of calling onDrag
+    this.costmap = null; // {meta, image}: the navigator's latest costmap
+    this.showCostmap = false;
+    this.pinch = new Pinch(this);
     canvas.addEventListener("wheel", (e) => this.wheel(e), { passive: false });
     this.press = null;
     this.drawQueued = false;
     canvas.addEventListener("pointerdown", (e) => this.down(e));
     canvas.addEventListener("pointerup", (e) => this.up(e));
     canvas.addEventListener("pointermove", (e) => this.move(e));
+    canvas.addEventListener("pointercancel", (e) => this.cancel(e));
     new ResizeObserver(() => this.redraw()).observe(canvas);
   }
 
@@ -41,6 +49,9 @@ export class LiveMap {
     switch (msg.type) {
       case "map":
         if (!this.meta || msg.version !== this.meta.version) this.loadMap(msg);
+        return;
+      case "costmap":
+        this.loadCostmap(msg);
         return;
       case "pose":
         this.layers.pose = msg;
@@ -92,6 +103,22 @@ export class LiveMap {
     img.src = msg.url;
   }
 
+  loadCostmap(msg) {
+    const img = new Image();
+    img.onload = () => {
+      this.costmap = { meta: msg, image: img };
+      this.canvas.dataset.costmapStamp = String(msg.stamp);
+      if (this.showCostmap) this.redraw();
+    };
+    img.src = `data:image/png;base64,${msg.png}`;
+  }
+
+  /** Show or hide the costmap layer. */
+  setCostmap(on) {
+    this.showCostmap = on;
+    this.redraw();
+  }
+
   /** Scale (pixels per metre) and offset: the map fitted into the canvas, times the zoom,
    * around the robot (following), the panned-to point or the map's centre. */
   view() {
@@ -106,13 +133,18 @@ export class LiveMap {
 
   /** Zoom by ``factor`` keeping the world point under canvas pixel (px, py) in place. */
   zoomBy(factor, px = this.canvas.clientWidth / 2, py = this.canvas.clientHeight / 2) {
+    const [wx, wy] = this.toWorld(px, py);
+    this.zoomTo(this.zoom * factor, wx, wy, px, py);
+  }
+
+  /** Zoom to ``zoom`` with the world point (wx, wy) at canvas pixel (px, py) (when not following). */
+  zoomTo(zoom, wx, wy, px, py) {
     const v = this.view();
-    const [wx, wy] = this.toWorld(px, py, v);
     const old = this.zoom;
-    this.zoom = Math.min(ZOOM_MAX, Math.max(ZOOM_MIN, this.zoom * factor));
+    this.zoom = Math.min(ZOOM_MAX, Math.max(ZOOM_MIN, zoom));
     const scale = v.scale * (this.zoom / old);
     if (!this.follow) this.center = [wx - (px - v.w / 2) / scale, wy + (py - v.h / 2) / scale];
-    if (this.zoom === ZOOM_MIN) this.center = null;
+    if (this.zoom === ZOOM_MIN && !this.pinch.active) this.center = null;
     this.redraw();
   }
 
@@ -170,6 +202,8 @@ export class LiveMap {
       g.drawImage(this.image, x0, y0, this.meta.width * this.meta.resolution * v.scale,
         this.meta.height * this.meta.resolution * v.scale);
     }
+    this.canvas.dataset.costmapShown = String(Boolean(this.showCostmap && this.costmap));
+    if (this.showCostmap && this.costmap) this.drawGrid(this.costmap.meta, this.costmap.image, v);
     const L = this.layers;
     g.fillStyle = "#ff3b30";
     for (const [x, y] of L.scan) {
@@ -244,6 +278,14 @@ export class LiveMap {
     }
   }
 
+  /** A grid image (top row = highest y) over its cells. */
+  drawGrid(meta, image, v) {
+    const g = this.ctx;
+    const [x0, y0] = this.toPx(meta.origin.x, meta.origin.y + meta.height * meta.resolution, v);
+    g.imageSmoothingEnabled = false;
+    g.drawImage(image, x0, y0, meta.width * meta.resolution * v.scale, meta.height * meta.resolution * v.scale);
+  }
+
   /** The place navigation is going to (from /nav/state), as a goal marker. */
   placeGoal() {
     const name = this.layers.navPlace;
@@ -302,15 +344,21 @@ export class LiveMap {
 
   down(e) {
     const [px, py] = this.local(e);
+    this.canvas.setPointerCapture(e.pointerId);
+    if (this.pinch.down(e.pointerId, px, py)) { // a second finger: a pinch, not a click or drag
+      this.press = null;
+      this.redraw();
+      return;
+    }
+    if (this.pinch.spent) return;
     const v = this.view();
     const [cx, cy] = this.toWorld(v.w / 2, v.h / 2, v);
     this.press = { px, py, qx: px, qy: py, dragging: false, center: [cx, cy], scale: v.scale };
-    this.canvas.setPointerCapture(e.pointerId);
   }
 
   move(e) {
-    if (!this.press) return;
     const [qx, qy] = this.local(e);
+    if (this.pinch.move(e.pointerId, qx, qy) || !this.press) return;
     Object.assign(this.press, { qx, qy });
     if (Math.hypot(qx - this.press.px, qy - this.press.py) > DRAG_PX) this.press.dragging = true;
     if (this.press.dragging && this.panMode) {
@@ -321,9 +369,19 @@ export class LiveMap {
     if (this.press.dragging) this.redraw();
   }
 
+  cancel(e) {
+    this.pinch.up(e.pointerId);
+    this.press = null;
+    this.redraw();
+  }
+
   up(e) {
     const p = this.press;
     this.press = null;
+    if (this.pinch.up(e.pointerId)) {
+      this.redraw();
+      return;
+    }
     if (!p) return;
     const [qx, qy] = this.local(e);
     const [x, y] = this.toWorld(p.px, p.py);

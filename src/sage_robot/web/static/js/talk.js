@@ -2,6 +2,25 @@
 import { $, api, el } from "./common.js";
 
 const MIN_RECORDING_MS = 300; // shorter presses are taps, not speech
+const UNREACHABLE = "SAGE could not be reached — check the Wi-Fi connection and try again.";
+
+/** What the page is doing, said in #status: "idle", "thinking" (a question is on its way: from
+ * the end of typing or recording to the reply), "error" (it failed; the text says why). */
+function setState(state, text = "") {
+  const status = $("status");
+  status.textContent = state === "thinking" ? "thinking…" : text;
+  status.classList.toggle("thinking", state === "thinking");
+  status.classList.toggle("error", state === "error");
+  document.body.dataset.talk = state;
+  $("ask-btn").disabled = state === "thinking";
+}
+
+/** One clear line for a failed request (status 0: no answer from the robot at all). */
+function failure(status, data) {
+  if (status === 0) return UNREACHABLE;
+  const why = data.error || `the robot answered with error ${status}`;
+  return `Sorry, no answer: ${why}`;
+}
 
 async function speak(text) {
   try {
@@ -25,19 +44,19 @@ async function speak(text) {
 }
 
 async function answer(result) {
-  const { ok, data } = result;
+  const { ok, status, data } = result;
   if (!ok) {
-    $("status").textContent = data.error || "SAGE could not answer";
+    setState("error", failure(status, data));
     return;
   }
-  if (data.error) {
-    $("status").textContent = data.error;
+  if (data.error) { // understood, but nothing to answer (no words heard)
+    setState("error", data.error);
     return;
   }
   const turn = el("div", { class: "turn" }, el("div", { class: "bubble you" }, data.transcript),
     el("div", { class: "bubble sage" }, data.reply));
   $("conversation").prepend(turn); // newest exchange on top, question above its reply
-  $("status").textContent = "";
+  setState("idle");
   document.body.dataset.replies = String(Number(document.body.dataset.replies || 0) + 1);
   if (data.reply) speak(data.reply);
 }
@@ -48,7 +67,7 @@ $("ask").addEventListener("submit", async (ev) => {
   if (!text) return;
   $("question").value = "";
   if (!$("robot-mic").hidden && $("robot-mic-on").checked) return sayToRobot(text);
-  $("status").textContent = "thinking…";
+  setState("thinking");
   answer(await api("/api/talk/text", { text }));
 });
 
@@ -57,8 +76,9 @@ $("ask").addEventListener("submit", async (ev) => {
 // the face goes through listening, thinking and speaking as for a visitor standing at the robot.
 async function sayToRobot(text) {
   $("status").textContent = "saying it to the robot…";
-  const { ok, data } = await api("/api/talk/robot_mic", { text });
-  $("status").textContent = ok ? `said to the robot: “${data.spoken}” — it answers on its face` : data.error || "could not say it";
+  const { ok, status, data } = await api("/api/talk/robot_mic", { text });
+  if (ok) setState("idle", `said to the robot: “${data.spoken}” — it answers on its face`);
+  else setState("error", failure(status, data));
   if (ok) document.body.dataset.saidToRobot = String(Number(document.body.dataset.saidToRobot || 0) + 1);
 }
 
@@ -77,14 +97,14 @@ let holding = false;
 async function startRecording() {
   if (recorder) return;
   if (!navigator.mediaDevices || !window.MediaRecorder) {
-    $("status").textContent = "this browser cannot record here (it needs https or localhost); type instead";
+    setState("error", "this browser cannot record here (it needs https or localhost); type instead");
     return;
   }
   try {
     const stream = await navigator.mediaDevices.getUserMedia({ audio: true });
     recorder = new MediaRecorder(stream, { mimeType: "audio/webm" });
   } catch (err) {
-    $("status").textContent = `no microphone: ${err.message || err}`;
+    setState("error", `no microphone: ${err.message || err}`);
     recorder = null;
     return;
   }
@@ -115,18 +135,18 @@ async function upload(stream) {
   $("ptt").classList.remove("recording");
   $("ptt").textContent = "Hold to talk";
   if (!long) {
-    $("status").textContent = "hold the button while you speak";
+    setState("error", "hold the button while you speak");
     return;
   }
   const form = new FormData();
   form.append("audio", new Blob(chunks, { type: "audio/webm" }), "speech.webm");
-  $("status").textContent = "thinking…";
+  setState("thinking");
   let result;
   try {
     const resp = await fetch("/api/talk/audio", { method: "POST", body: form });
-    result = { ok: resp.ok, data: await resp.json().catch(() => ({})) };
+    result = { ok: resp.ok, status: resp.status, data: await resp.json().catch(() => ({})) };
   } catch (err) {
-    result = { ok: false, data: { error: `network: ${err}` } };
+    result = { ok: false, status: 0, data: { error: `network: ${err}` } };
   }
   answer(result);
 }

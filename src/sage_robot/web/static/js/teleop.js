@@ -140,6 +140,10 @@ $("zoom-fit").addEventListener("click", () => {
   $("follow").checked = false;
 });
 $("follow").addEventListener("change", () => map.setFollow($("follow").checked));
+$("costmap-on").addEventListener("change", () => {
+  map.setCostmap($("costmap-on").checked);
+  for (const key of document.querySelectorAll(".costmap-key")) key.hidden = !$("costmap-on").checked;
+});
 $("pose-yes").addEventListener("click", async () => {
   const pose = pendingPose;
   clearPose();

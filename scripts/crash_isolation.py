@@ -1,0 +1,197 @@
+"""Measure crash isolation of `sage sim --processes` (issue #24): kill -9 groups while the robot drives.
+
+Starts the simulator as process groups on a free loopback port, drives the robot with a
+steady teleop command on /cmd_vel (over Zenoh, as the pages' joystick would), then for each
+group named: kill -9 its process, and measures how long until the supervisor reports it
+running again (a new pid), whether any other group's pid changed, and how fast the robot
+moved meanwhile (ground truth). Killing ``motion`` (the serial bridge) must stop the robot
+while teleop keeps commanding: the firmware's command watchdog. Prints one JSON line.
+
+    .venv/bin/python scripts/crash_isolation.py --groups voice,brain,nav,motion
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+import yaml
+import zenoh
+
+from sage_robot.core import topics
+from sage_robot.core.config import default_profile_path
+from sage_robot.core.msgs import Twist
+from sage_robot.core.transport import wire
+from sage_robot.core.transport.keys import topic_key
+
+START_S = 300.0  # bound on the whole system coming up (s, wall)
+BACK_S = 120.0  # bound on one group coming back (s, wall)
+STOP_S = 30.0  # bound on the robot stopping after the motion group died (s, wall)
+TELEOP_PERIOD_S = 0.1  # the teleop command's period (s)
+DRIVE = Twist(0.2, 0.3)  # m/s, rad/s: a slow circle
+MOVING_MPS = 0.05  # faster than this counts as moving (m/s)
+POLL_S = 0.02
+
+
+class Watch:
+    """The robot's health and ground truth as seen over Zenoh."""
+
+    def __init__(self, endpoint: str, robot: str) -> None:
+        cfg = zenoh.Config()
+        cfg.insert_json5("mode", '"client"')
+        cfg.insert_json5("connect/endpoints", json.dumps([endpoint]))
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+        self.session = zenoh.open(cfg)
+        self.robot = robot
+        self.health: dict[str, Any] = {}
+        self.truth: list[tuple[float, float, float]] = []  # (wall, sim stamp, speed)
+        self.session.declare_subscriber(topic_key(robot, topics.HEALTH), self._on_health)
+        self.session.declare_subscriber(topic_key(robot, topics.SIM_TRUTH), self._on_truth)
+        self.teleop = threading.Event()
+
+    def _on_health(self, sample: Any) -> None:
+        report = wire.decode(sample.payload.to_bytes())
+        self.health = {n.name: n for n in report.nodes}
+
+    def _on_truth(self, sample: Any) -> None:
+        odom = wire.decode(sample.payload.to_bytes())
+        self.truth.append((time.monotonic(), odom.stamp, abs(odom.twist.linear_x)))
+
+    def processes(self) -> dict[str, Any]:
+        return {k.split(":", 1)[1]: v for k, v in self.health.items() if k.startswith("process:")}
+
+    def drive(self) -> None:
+        key, frame = topic_key(self.robot, topics.CMD_VEL), wire.encode(DRIVE)
+        while self.teleop.is_set():
+            self.session.put(key, frame)
+            time.sleep(TELEOP_PERIOD_S)
+
+    def speed_since(self, t0: float) -> list[float]:
+        return [v for w, _, v in self.truth if w >= t0]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def page_health(url: str, group: str) -> dict[str, Any]:
+    """The web page's /api/health entry for ``group``'s process (what the pages show)."""
+    with urllib.request.urlopen(url, timeout=10) as r:
+        nodes = json.loads(r.read())["nodes"]
+    entry = nodes.get(f"process:{group}", {})
+    return {"state": entry.get("state"), "restarts": entry.get("restarts")}
+
+
+def connect(endpoint: str, robot: str) -> Watch:
+    """A Watch once the supervisor's router listens (bounded by START_S)."""
+    t0 = time.monotonic()
+    while True:
+        try:
+            return Watch(endpoint, robot)
+        except zenoh.ZError:
+            if time.monotonic() - t0 > START_S:
+                raise SystemExit(f"no router at {endpoint} after {START_S:g} s") from None
+            time.sleep(0.5)
+
+
+def wait(cond: Any, bound: float, what: str) -> float:
+    t0 = time.monotonic()
+    while not cond():
+        if time.monotonic() - t0 > bound:
+            raise SystemExit(f"timed out after {bound:g} s waiting for {what}")
+        time.sleep(POLL_S)
+    return time.monotonic() - t0
+
+
+def kill_and_measure(w: Watch, group: str) -> dict[str, Any]:
+    procs = w.processes()
+    pids = {g: p.stats.get("pid") for g, p in procs.items()}
+    t_kill = time.monotonic()
+    sim_kill = w.truth[-1][1] if w.truth else 0.0
+    os.kill(int(pids[group]), signal.SIGKILL)
+    out: dict[str, Any] = {"group": group}
+    if group == "motion":
+        wait(lambda: any(v < 0.01 for w_, _, v in w.truth if w_ > t_kill + 0.05), STOP_S, "the robot stopped")
+        stopped = next(s for w_, s, v in w.truth if w_ > t_kill + 0.05 and v < 0.01)
+        out["robot_stopped_after_sim_s"] = round(stopped - sim_kill, 3)
+
+    def back() -> bool:
+        p = w.processes().get(group)
+        return p is not None and p.state == "running" and p.stats.get("pid") != pids[group]
+
+    wait(back, BACK_S, f"{group} back")
+    out["back_after_s"] = round(time.monotonic() - t_kill, 2)
+    members = str(procs[group].stats.get("nodes", "")).split(",")
+    wait(lambda: all(getattr(w.health.get(n), "state", "") == "running" for n in members), BACK_S,
+         f"{group}'s nodes running")
+    out["nodes_running_after_s"] = round(time.monotonic() - t_kill, 2)
+    speeds = w.speed_since(t_kill)
+    out["min_speed_mps_while_down"] = round(min(speeds), 3) if speeds else None
+    out["max_speed_mps_while_down"] = round(max(speeds), 3) if speeds else None
+    now = {g: p.stats.get("pid") for g, p in w.processes().items()}
+    out["others_restarted"] = sorted(g for g in pids if g != group and now.get(g) != pids[g])
+    out["restarts"] = w.processes()[group].restarts
+    return out
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p.add_argument("--groups", default="voice,brain,nav,motion", help="groups to kill, in order")
+    p.add_argument("--headless", action="store_true", help="no web server (fewer processes)")
+    args = p.parse_args()
+    robot, endpoint, web_port = f"crash{os.getpid()}", f"tcp/127.0.0.1:{free_port()}", free_port()
+    data = yaml.safe_load(default_profile_path().read_text())
+    data["bus"] = {"robot_id": robot, "zenoh": {"listen": [endpoint]}}
+    data["web"] = {**data.get("web", {}), "host": "127.0.0.1", "port": web_port, "http_port": None}
+    profile = Path(tempfile.mkdtemp()) / "sim.yaml"
+    profile.write_text(yaml.safe_dump(data))
+    web = None if args.headless else f"http://127.0.0.1:{web_port}/api/health"
+    cmd = [sys.executable, "-m", "sage_robot.cli.main", "--profile", str(profile), "sim", "--processes"]
+    sage = subprocess.Popen(cmd + (["--headless"] if args.headless else []))
+    results: dict[str, Any] = {"kills": []}
+    w: Watch | None = None
+    try:
+        w = connect(endpoint, robot)
+        results["start_s"] = round(wait(lambda: w.processes() and all(
+            x.state == "running" for x in w.processes().values()), START_S, "every group running"), 1)
+        results["groups"] = {g: x.stats.get("nodes") for g, x in w.processes().items()}
+        w.teleop.set()
+        threading.Thread(target=w.drive, daemon=True).start()
+        wait(lambda: w.truth and w.truth[-1][2] > MOVING_MPS, START_S, "the robot moving")
+        for group in [g for g in args.groups.split(",") if g]:
+            results["kills"].append(kill_and_measure(w, group))
+            if web is not None:
+                time.sleep(1.5)  # one health period: the page's report is at most this old
+                results["kills"][-1]["page"] = page_health(web, group)
+            wait(lambda: w.truth and w.truth[-1][2] > MOVING_MPS, BACK_S, "the robot moving again")
+        w.teleop.clear()
+    finally:
+        sage.send_signal(signal.SIGINT)
+        try:
+            sage.wait(30)
+        except subprocess.TimeoutExpired:
+            sage.kill()
+        if w is not None:
+            with contextlib.suppress(Exception):
+                w.session.close()  # type: ignore[no-untyped-call]
+    print(json.dumps(results))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
