@@ -155,9 +155,14 @@ class SimClock(Clock):
         release: asyncio.Future[None] = loop.create_future()
         self._held[job] = release
         try:
-            if self._driven:
-                await release  # set at a hand-over once the thread is done, in offload order
-            if not thread.done():  # not driven (or the run ended): the thread itself
+            if not self._driven:  # nobody steps (yet): the thread itself, or a hand-over
+                finished: asyncio.Future[Any] = asyncio.wrap_future(thread)
+                either: set[asyncio.Future[Any]] = {finished, release}
+                await asyncio.wait(either, return_when=asyncio.FIRST_COMPLETED)
+            if self._driven and not release.done():
+                # stepping (began meanwhile, maybe): the result is handed over in offload order
+                await release
+            if not thread.done():  # the run ended before the hand-over: the thread itself
                 await asyncio.wrap_future(thread)
             return thread.result()
         finally:
