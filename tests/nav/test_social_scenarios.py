@@ -19,7 +19,6 @@ from .nav_sim import PERSON_RADIUS_M, running, settings_for, write_building
 from .test_navigator import GOAL_TOLERANCE_TRUTH_M, REAL_TIMEOUT_S
 
 RES = 0.05
-DEBUG = True
 # 14 m long corridors; 0.5 m per character (interior y from 0.5 up).
 CORRIDOR_3M = """
 ##############################
@@ -116,10 +115,6 @@ async def test_pulls_over_for_a_crowd_in_a_narrow_corridor(tmp_path) -> None:
                 if w[0] < 1.0:  # out of the corridor
                     walkers.remove(w)
                     sim.people.remove(w)
-            if DEBUG and int(clock.now() / WALK_STEP_S) % 5 == 0:
-                print(round(clock.now(), 2), [round(v, 2) for v in sim.pose], round(sim.cmd.linear_x, 2),
-                      round(sim.cmd.angular_z, 2), [[round(v, 2) for v in w] for w in walkers],
-                      [e.kind for e in events if e.stamp > clock.now() - 0.25])
         result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
     assert result.ok, result.message
     assert sim.collisions == 0

@@ -51,7 +51,7 @@ from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.nav import NavigateFeedback, NavigateResult, NavState
 from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_heading
 from sage_robot.nav.planner import PATH_SPACING_M, NoPath, Plan, path_blocked, plan
-from sage_robot.nav.social_drive import GROUP_EVENT_WITHIN_M, Social, group_near, keep_right_plan
+from sage_robot.nav.social_drive import GROUP_EVENT_WITHIN_M, Social, group_ahead, keep_right_plan
 
 if TYPE_CHECKING:
     from sage_robot.nav.costmap import Costmap
@@ -185,7 +185,7 @@ class GoalRun:
             result = await self.clock.offload(work, latency_s=PLAN_LATENCY_S)
         except NoPath as exc:
             raise Blocked(str(exc)) from None
-        if with_obstacles and group_near(start, tracks, GROUP_EVENT_WITHIN_M):
+        if with_obstacles and group_ahead(start, tracks, GROUP_EVENT_WITHIN_M):
             self.social.say("passing_group", "going around the group, not through it")
         node.publish_plan(result.points)
         return result

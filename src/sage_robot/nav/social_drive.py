@@ -177,9 +177,12 @@ def keep_right_plan(p: Plan, cm: Costmap) -> Plan:
     return Plan(points, float(np.hypot(*np.diff(points, axis=0).T).sum()) if len(points) > 1 else 0.0)
 
 
-def group_near(pose: Pose, tracks: list[Track], within_m: float) -> bool:
-    """Whether a group of people stands or walks within ``within_m`` of the robot."""
-    return any(nearest_person_m(pose, g) <= within_m for g in groups(tracks))
+def group_ahead(pose: Pose, tracks: list[Track], within_m: float) -> bool:
+    """Whether a group of people stands or walks ahead of the robot, within ``within_m``."""
+    x, y, th = pose
+    c, s = math.cos(th), math.sin(th)
+    return any(0.0 < c * (k.x - x) + s * (k.y - y) and math.hypot(k.x - x, k.y - y) <= within_m
+               for g in groups(tracks) for k in g)
 
 
 def _room_to_the_right(cm: Costmap, pose: Pose) -> float:

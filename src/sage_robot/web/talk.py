@@ -1,8 +1,10 @@
 """Visitors' push-to-talk (the seed's web_ptt.py), public and rate-limited per address.
 
 - ``POST /api/talk/text`` ``{"text": "..."}`` → the brain's reply.
-- ``POST /api/talk/audio`` (multipart field ``audio``: the browser's MediaRecorder WebM)
-  → ffmpeg → 16 kHz → speech to text → the brain → ``{"transcript", "reply"}``.
+- ``POST /api/talk/audio`` (multipart field ``audio``: the browser's MediaRecorder WebM/Opus,
+  or MP4/AAC from Safari) → ffmpeg → 16 kHz → speech to text → the brain →
+  ``{"transcript", "reply"}``. ``tests/web/test_phone_e2e.py`` runs it end to end from Chromium's
+  fake microphone over HTTPS with the real models.
 - ``POST /api/talk/say`` ``{"text": "..."}`` → the reply spoken, as ``audio/wav``.
 - ``GET /api/talk/robot_mic`` → ``{"available"}``; ``POST /api/talk/robot_mic`` ``{"text"}``:
   in the simulator only, the words are spoken into the simulated robot's microphone

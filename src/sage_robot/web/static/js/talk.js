@@ -2,6 +2,10 @@
 import { $, api, el } from "./common.js";
 
 const MIN_RECORDING_MS = 300; // shorter presses are taps, not speech
+// What MediaRecorder records, best first: WebM/Opus (Chrome, Firefox, Android), MP4/AAC (Safari,
+// every iPhone browser). The robot decodes any of them (ffmpeg).
+const RECORDING_TYPES = ["audio/webm;codecs=opus", "audio/webm", "audio/mp4", "audio/ogg;codecs=opus"];
+const EXTENSIONS = { "audio/webm": "webm", "audio/mp4": "m4a", "audio/ogg": "ogg" };
 const UNREACHABLE = "SAGE could not be reached — check the Wi-Fi connection and try again.";
 
 /** What the page is doing, said in #status: "idle", "thinking" (a question is on its way: from
@@ -102,7 +106,8 @@ async function startRecording() {
   }
   try {
     const stream = await navigator.mediaDevices.getUserMedia({ audio: true });
-    recorder = new MediaRecorder(stream, { mimeType: "audio/webm" });
+    const type = RECORDING_TYPES.find((t) => MediaRecorder.isTypeSupported(t));
+    recorder = new MediaRecorder(stream, type ? { mimeType: type } : {});
   } catch (err) {
     setState("error", `no microphone: ${err.message || err}`);
     recorder = null;
@@ -112,7 +117,7 @@ async function startRecording() {
   started = performance.now();
   if (!holding) started -= MIN_RECORDING_MS; // released while the microphone was opening
   recorder.ondataavailable = (e) => e.data.size && chunks.push(e.data);
-  recorder.onstop = () => upload(recorder.stream);
+  recorder.onstop = () => upload(recorder.stream, recorder.mimeType);
   recorder.start();
   if (!holding) {
     recorder.stop();
@@ -128,7 +133,7 @@ function stopRecording() {
   recorder.stop();
 }
 
-async function upload(stream) {
+async function upload(stream, mimeType) {
   stream.getTracks().forEach((t) => t.stop());
   const long = performance.now() - started >= MIN_RECORDING_MS;
   recorder = null;
@@ -139,7 +144,8 @@ async function upload(stream) {
     return;
   }
   const form = new FormData();
-  form.append("audio", new Blob(chunks, { type: "audio/webm" }), "speech.webm");
+  const type = mimeType || "audio/webm";
+  form.append("audio", new Blob(chunks, { type }), `speech.${EXTENSIONS[type.split(";")[0]] || "webm"}`);
   setState("thinking");
   let result;
   try {
