@@ -3,8 +3,10 @@
     .venv/bin/pip install -e '.[wake-train]'   # scikit-learn, for the regression
     .venv/bin/python scripts/train_wake_head.py [--out PATH] [--workers 2]
 
-About 4 minutes on 2 cores. Deterministic: the same packages give the same weights
-(Piper without its random prosody, every random stream seeded).
+Several minutes on 2 idle cores (48 min for the bundled head, on a heavily shared
+machine). Meant to be deterministic: every random stream is seeded, Piper's random
+prosody by ``onnxruntime.set_seed`` before each part's voice loads (a second run giving
+the same weights was not re-checked after that was added).
 
 The head is a logistic regression on openWakeWord's 16 x 96 speech-embedding window
 (the window the bundled ``hey_jarvis`` model scores), trained to hear "hey Jarvis" in

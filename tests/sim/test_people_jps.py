@@ -172,3 +172,10 @@ def test_unknown_people_model_is_a_clear_error() -> None:
                    grid=grid, start=(2.0, 2.0, 0.0), robot_radius=ROBOT_RADIUS_M)
     with pytest.raises(ValueError, match="share of people who ignore"):
         _world(grid, (2.0, 2.0, 0.0), [], "simple", ignore_share=1.5)
+
+
+def test_auto_picks_jupedsim_when_installed() -> None:
+    grid = room(4.0, 4.0)
+    crowd = make_crowd("auto", [], None, lambda x, y: 1.0, np.random.default_rng(0), None,
+                       grid=grid, start=(2.0, 2.0, 0.0), robot_radius=ROBOT_RADIUS_M)
+    assert type(crowd).__name__ == ("JpsCrowd" if HAVE_JPS else "Crowd")

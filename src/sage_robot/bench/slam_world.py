@@ -12,8 +12,9 @@ and drifting wheel odometry, stepped scan by scan along a list of true poses.
   scale error (``TURN_SCALE_ERROR``), a heading drift per metre (``YAW_DRIFT_RAD_PER_M``) and
   random noise growing with the square root of the distance.
 
-``seen`` counts, per cell of the true grid, the lidar returns that ended in it (from the true
-ranges): the walls the robot could have mapped.
+The map's unknown cells are solid in this world (some source maps draw most walls as the
+edge of the known floor). ``seen`` counts, per cell of the true grid, the lidar returns that
+ended in it (from the true ranges): the walls the robot could have mapped.
 """
 
 from __future__ import annotations
@@ -114,6 +115,10 @@ class SimDrive:
         self.rng_odom = rngs[0]
         self.truth = truth
         self.clutter = 0
+        # Unknown space is solid: a SLAM-made source map (Willow Garage) marks most of its walls
+        # as the edge of the known floor rather than as occupied cells.
+        solid = np.where(grid.data < 0, np.int8(100), grid.data).astype(np.int8)
+        grid = dataclasses.replace(grid, data=solid)
         if clutter:
             grid, self.clutter = add_clutter(grid, np.asarray(truth), rngs[1])
         self.grid = grid

@@ -15,6 +15,9 @@ collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
    map (it stood still and is bigger than a person), or a closed passage (no way even on
    the map: said at once, nothing is waited for).
 
+People (issue #20, :mod:`sage_robot.nav.social_drive`): the robot slows down near them,
+keeps right, plans around groups, and pulls over for a crowd in a narrow corridor.
+
 Where ``robot.allow_reverse`` is true, a robot stopped close in front of an obstacle first
 backs off (at most ``BACKUP_M``, slowly, only onto floor that is clear behind it).
 

@@ -181,7 +181,7 @@ def group_ahead(pose: Pose, tracks: list[Track], within_m: float) -> bool:
     """Whether a group of people stands or walks ahead of the robot, within ``within_m``."""
     x, y, th = pose
     c, s = math.cos(th), math.sin(th)
-    return any(0.0 < c * (k.x - x) + s * (k.y - y) and math.hypot(k.x - x, k.y - y) <= within_m
+    return any(c * (k.x - x) + s * (k.y - y) > 0.0 and math.hypot(k.x - x, k.y - y) <= within_m
                for g in groups(tracks) for k in g)
 
 

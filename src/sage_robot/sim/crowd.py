@@ -7,9 +7,10 @@
   (``sim/people_jps.py``; LGPL-3.0, the optional extra ``people``): they avoid each other,
   the walls of the map's free space and the robot.
 
-``sim.people_model: auto`` picks JuPedSim when it imports. When the robot says "excuse me"
+``sim.people_model: auto`` picks JuPedSim when it imports (and the simple walkers on a map
+it cannot take: a rotated origin). When the robot says "excuse me"
 (the navigator's ``blocked_by_people`` event) the world picks, among the people in front of
-it, where each one steps aside (:func:`aside_spot`); a seeded share
+it, where each one steps aside (:func:`aside_path`); a seeded share
 (``sim.people_ignore_share``) stays put.
 """
 
@@ -25,7 +26,7 @@ from sage_robot.core.msgs import OccupancyGrid
 from sage_robot.sim.people import PERSON_RADIUS_M, WALL_MARGIN_M, Crowd, Lanes, PersonState
 
 PEOPLE_MODELS = ("auto", "jupedsim", "simple")
-ASK_RANGE_M = 3.5  # people this close to the robot, in front of it, hear "excuse me"
+ASK_RANGE_M = 5.0  # people this close to the robot, in front of it, hear "excuse me"
 ASIDE_CLEAR_M = 0.3  # a person steps this far clear of the robot's way (beyond both radii)
 ASIDE_STEPS_M = (0.5, 0.8, 1.1, 1.5, 2.0, 2.5, 3.0)  # how far people look for a spot
 ASIDE_DIRECTIONS = 24  # directions tried at each distance
@@ -46,7 +47,7 @@ class CrowdModel(Protocol):
 
     def step(self, dt: float, t: float, robot: tuple[float, float, float], robot_radius: float) -> None: ...
 
-    def send_aside(self, person: PersonState, spot: tuple[float, float]) -> None: ...
+    def send_aside(self, person: PersonState, path: list[tuple[float, float]]) -> None: ...
 
 
 def jupedsim_available() -> bool:
@@ -79,8 +80,13 @@ def make_crowd(
         return Crowd(people, lanes, clearance, rng, line_of_sight)
     from sage_robot.sim.people_jps import JpsCrowd
 
-    return JpsCrowd(people, lanes, clearance, rng, line_of_sight, grid=grid, start=start,
-                    robot_radius=robot_radius)
+    try:
+        return JpsCrowd(people, lanes, clearance, rng, line_of_sight, grid=grid, start=start,
+                        robot_radius=robot_radius)
+    except ValueError:
+        if model == "jupedsim":
+            raise
+        return Crowd(people, lanes, clearance, rng, line_of_sight)  # auto: a map JuPedSim cannot take
 
 
 def asked_people(people: list[PersonState], robot: tuple[float, float, float]) -> list[PersonState]:
@@ -94,34 +100,39 @@ def asked_people(people: list[PersonState], robot: tuple[float, float, float]) -
     return sorted(near, key=lambda p: (math.hypot(p.x - robot[0], p.y - robot[1]), p.id))
 
 
-def aside_spot(
+def aside_path(
     p: PersonState,
     robot: tuple[float, float, float],
     robot_radius: float,
     free: Callable[[float, float], bool],
-) -> tuple[float, float] | None:
-    """The nearest free spot, reachable in a straight line, that is out of the robot's way:
-    beside the line ahead of it (ASIDE_CLEAR_M beyond both radii) or behind it. None when
-    there is none (a person in a dead end): they stay."""
+) -> list[tuple[float, float]]:
+    """Where ``p`` goes to make way, as 1-2 straight legs: the nearest free spot out of the
+    robot's way (ASIDE_CLEAR_M beyond both radii beside the line ahead of it, or behind it),
+    reached straight, or by walking on ahead (away from the robot: out of a corridor or a
+    doorway) and then sideways. [] when there is none (a dead end): they stay."""
     c, s = math.cos(robot[2]), math.sin(robot[2])
     clear = robot_radius + PERSON_RADIUS_M + ASIDE_CLEAR_M
+
+    def out_of_way(x: float, y: float) -> bool:
+        dx, dy = x - robot[0], y - robot[1]
+        return abs(-dx * s + dy * c) >= clear or dx * c + dy * s <= -clear
+
     for dist in ASIDE_STEPS_M:
-        best: tuple[float, tuple[float, float]] | None = None
-        for k in range(ASIDE_DIRECTIONS):
+        for k in range(ASIDE_DIRECTIONS):  # straight to the side (or back)
             a = 2.0 * math.pi * k / ASIDE_DIRECTIONS
             x, y = p.x + dist * math.cos(a), p.y + dist * math.sin(a)
-            dx, dy = x - robot[0], y - robot[1]
-            along, across = dx * c + dy * s, -dx * s + dy * c
-            if abs(across) < clear and along > -clear:
-                continue  # still in the robot's way
-            if not free(x, y) or not _walkable(p.x, p.y, x, y, free):
-                continue
-            forward = max(along, 0.0)  # prefer stepping sideways over walking ahead of the robot
-            if best is None or forward < best[0]:
-                best = (forward, (x, y))
-        if best is not None:
-            return best[1]
-    return None
+            if out_of_way(x, y) and free(x, y) and _walkable(p.x, p.y, x, y, free):
+                return [(x, y)]
+    for on in ASIDE_STEPS_M:  # on ahead, then to the side
+        vx, vy = p.x + on * c, p.y + on * s
+        if not (free(vx, vy) and _walkable(p.x, p.y, vx, vy, free)):
+            break
+        for side in ASIDE_STEPS_M:
+            for sign in (1.0, -1.0):
+                x, y = vx - sign * side * s, vy + sign * side * c
+                if out_of_way(x, y) and free(x, y) and _walkable(vx, vy, x, y, free):
+                    return [(vx, vy), (x, y)]
+    return []
 
 
 def _walkable(x0: float, y0: float, x1: float, y1: float, free: Callable[[float, float], bool]) -> bool:

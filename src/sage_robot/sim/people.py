@@ -70,7 +70,7 @@ class PersonState:
     fixed: bool = False  # scenario person with a fixed patrol (no lanes)
     patrol: list[tuple[float, float]] = field(default_factory=list)
     waited_s: float = 0.0  # walker: how long it has been held up at the robot (s)
-    aside: tuple[float, float] | None = None  # asked to step aside: walking there (m)
+    aside: list[tuple[float, float]] = field(default_factory=list)  # asked to make way: going there
     ignores: bool | None = None  # decided at the first "excuse me": stays put when asked
 
 
@@ -189,17 +189,17 @@ class Crowd:
                 continue
             self._move_toward(p, goal, dt, robot, robot_radius)
 
-    def send_aside(self, person: PersonState, spot: tuple[float, float]) -> None:
-        """Asked to make way: walk to ``spot`` (m), then carry on (standers stand there)."""
-        person.aside = spot
+    def send_aside(self, person: PersonState, path: list[tuple[float, float]]) -> None:
+        """Asked to make way: walk along ``path`` (m), then carry on (standers stand there)."""
+        person.aside = list(path)
 
     def _goal(
         self, p: PersonState, t: float, robot: tuple[float, float, float]
     ) -> tuple[float, float] | None:
-        if p.aside is not None:
-            if math.hypot(p.aside[0] - p.x, p.aside[1] - p.y) >= ARRIVE_M:
-                return p.aside
-            p.aside = None
+        while p.aside and math.hypot(p.aside[0][0] - p.x, p.aside[0][1] - p.y) < ARRIVE_M:
+            p.aside.pop(0)
+        if p.aside:
+            return p.aside[0]
         if p.behaviour in ("stander", "group"):
             return None
         if p.wait_until > t:

@@ -47,14 +47,15 @@ GUARD_STEPS = 3  # a person within this many of their steps of the robot's body 
 STUCK_S = 6.0  # a person with a goal who has not moved for this long gives the goal up
 STUCK_MPS = 0.05
 PART_RINGS_CELLS = 0.25  # the walkable polygon is widened by this many cells (see below)
-MIN_HOLE_M2 = 0.01  # holes in the walkable polygon smaller than this are dropped
+MIN_HOLE_M2 = 0.05  # holes in the walkable polygon smaller than this are dropped (specks)
+SIMPLIFY_M = 0.05  # the walkable polygon is simplified to this tolerance
 NUDGE_M = (0.1, 0.2, 0.3, 0.45, 0.6)  # a person placed on another is moved this far...
 NUDGE_DIRECTIONS = 8  # ...in one of these directions (the first that fits)
 
 
 def walkable_polygon(grid: OccupancyGrid, start: tuple[float, float]) -> Any:
     """The free cells 4-connected to ``start`` as one shapely Polygon (m, map frame;
-    an unrotated map origin), simplified to half a cell."""
+    an unrotated map origin), simplified to SIMPLIFY_M."""
     if abs(grid.origin.theta) > 1e-9:
         raise ValueError("the jupedsim people model needs a map with an unrotated origin")
     labels, _ = ndimage.label(grid.data == FREE)
@@ -74,8 +75,10 @@ def walkable_polygon(grid: OccupancyGrid, start: tuple[float, float]) -> Any:
     poly = next((p for p in parts if p.covers(here)), max(parts, key=lambda p: p.area))
     # JuPedSim's triangulation crashes (a segfault, measured on willow-2010-02-18) on rings
     # that touch at a point (diagonal cells): widening the floor by a fraction of a cell
-    # parts them; then simplify, and drop specks.
-    poly = poly.buffer(res * PART_RINGS_CELLS, join_style="mitre").simplify(res / 2, preserve_topology=True)
+    # parts them; then simplify (SIMPLIFY_M) and drop specks (a finer polygon made its geometry
+    # and routing take 53 s to build on willow-full instead of 5 s, measured).
+    poly = poly.buffer(res * PART_RINGS_CELLS, join_style="mitre")
+    poly = poly.simplify(SIMPLIFY_M, preserve_topology=True)
     holes = [h for h in poly.interiors if shapely.Polygon(h).area >= MIN_HOLE_M2]
     return shapely.Polygon(poly.exterior, holes)
 
@@ -164,7 +167,7 @@ class JpsCrowd(Crowd):
     def _tick(self, t: float, robot: tuple[float, float, float], rr: float) -> None:
         goals = []
         for i, p in enumerate(self.people):
-            goal = self._goal(p, t, robot)
+            goal = self._reachable(p, self._goal(p, t, robot))
             goals.append(goal)
             agent = self._sim.agent(self._agents[i])
             if goal is None:
@@ -181,6 +184,17 @@ class JpsCrowd(Crowd):
         self._sim.iterate()
         for i, p in enumerate(self.people):
             self._read_back(i, p, goals[i], robot, rr)
+
+    def _reachable(self, p: PersonState, goal: tuple[float, float] | None) -> tuple[float, float] | None:
+        """``goal``, or None (and the goal dropped) when it is off the walkable polygon (a
+        random spot or lane node in a part of the map the robot's floor does not reach)."""
+        if goal is None or self._routing.is_routable(goal):
+            return goal
+        if p.aside:
+            p.aside.clear()
+        elif p.route:
+            p.route.pop(0)
+        return None
 
     def _guarded(self, p: PersonState, corner: tuple[float, float], robot: tuple[float, float, float],
                  rr: float) -> bool:
@@ -230,7 +244,7 @@ class JpsCrowd(Crowd):
             return
         if self._still_s[i] >= STUCK_S:  # wedged (a crowd, a corner): give this goal up
             self._still_s[i] = 0.0
-            if p.aside is not None:
-                p.aside = None
+            if p.aside:
+                p.aside.clear()
             elif p.route and math.hypot(p.route[0][0] - x, p.route[0][1] - y) >= ARRIVE_M:
                 p.route.pop(0)

@@ -23,7 +23,7 @@ import numpy as np
 from sage_robot.core.msgs import CompressedImage, LaserScan, OccupancyGrid
 from sage_robot.core.msgs.sim import LowObstacle, People, Person, SpeakerBearing, bearing_to_doa_deg
 from sage_robot.sim.camera import Camera, Scene, encode_jpeg
-from sage_robot.sim.crowd import aside_spot, asked_people, make_crowd, person_fits
+from sage_robot.sim.crowd import aside_path, asked_people, make_crowd, person_fits
 from sage_robot.sim.lidar import Lidar, LidarSpec
 from sage_robot.sim.people import PERSON_RADIUS_M, Lanes, PersonState
 from sage_robot.sim.raycast import GridRaycaster
@@ -182,9 +182,9 @@ class World:
         for p in asked_people(self.crowd.people, self.pose):
             if p.ignores is None:
                 p.ignores = bool(self.rng_ignore.random() < self.ignore_share)
-            spot = None if p.ignores else aside_spot(p, self.pose, self.robot_radius, fits)
-            if spot is not None:
-                self.crowd.send_aside(p, spot)
+            path = [] if p.ignores else aside_path(p, self.pose, self.robot_radius, fits)
+            if path:
+                self.crowd.send_aside(p, path)
                 moving.append(p.id)
         return moving
 

@@ -67,9 +67,12 @@ MIN_INTERVAL_S: dict[str, float] = {
     "nav": 0.2,
     "tour": 0.2,
     "captions": 0.1,
+    "social": 0.0,
     "camera": 1.0 / 15.0,  # frames/s cap per client; web.camera_fps overrides
 }
 EVENTS_KEPT = 50  # recent events shown on a newly opened page
+# the navigator's social events (issue #20), also shown on the kiosk face ("social" channel)
+SOCIAL_EVENT_KINDS = frozenset({"slowing_for_people", "pulling_over", "passing_group", "blocked_by_people"})
 QUEUE_KEPT = 100  # events and audio chunks queued per client before the oldest is dropped
 CAPTIONS_KEPT = 6  # caption lines in the captions channel's message
 CAPTION_MAX_CHARS = 600  # of one caption line
@@ -326,6 +329,8 @@ class Hub:
             "message": msg.message,
         }
         self.events.append(item)
+        if msg.kind in SOCIAL_EVENT_KINDS:
+            self.set("social", {**item, "type": "social"})
         for listener in self.listeners:
             if "events" in listener.channels:
                 listener.events.append(item)

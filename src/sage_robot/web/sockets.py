@@ -33,7 +33,7 @@ router = APIRouter()
 PING_PERIOD_S = 5.0  # server ping on /ws/status (s)
 POLICY_VIOLATION = 1008  # WebSocket close code: refused (origin or login)
 
-STATUS_CHANNELS = ("battery", "ui_state", "ui_state_seed", "estop", "nav", "captions", "tour")
+STATUS_CHANNELS = ("battery", "ui_state", "ui_state_seed", "estop", "nav", "captions", "tour", "social")
 LIVE_CHANNELS = (
     "map", "pose", "odom", "scan", "plan", "goal", "people", "loc", "nav", "estop", "teleop",
     "battery", "ui_state", "events", "costmap",

@@ -83,6 +83,22 @@ function showCaptions() {
 
 // ---------------------------------------------------------------- guiding
 let doneTimer = null;
+// The navigator's social events (issue #20): said on the guide line for a few seconds.
+const SOCIAL_SHOWN_MS = 5000;
+const SOCIAL_WORDS = {
+  slowing_for_people: "Slowing down for people…",
+  pulling_over: "Making room for people to pass…",
+  passing_group: "Going around the group…",
+  blocked_by_people: "Excuse me, may I pass?",
+};
+let social = null; // { text, until }
+function socialText() {
+  return social && Date.now() < social.until ? social.text : "";
+}
+function onSocial(msg) {
+  social = { text: SOCIAL_WORDS[msg.kind] || msg.message || "", until: Date.now() + SOCIAL_SHOWN_MS };
+  if (!$("guide").hidden && $("guide-stop").hidden === false) $("guide-progress").textContent = social.text;
+}
 
 function distanceText(m) {
   if (m === null || m === undefined || !(m > 0)) return ""; // 0 before the plan is known
@@ -120,7 +136,7 @@ function onNav(msg) {
   } else {
     $("guide-label").textContent = "Taking you to";
     const parts = [distanceText(msg.distance_remaining_m), etaText(msg.eta_s)].filter(Boolean);
-    $("guide-progress").textContent = NAV_WORDS[msg.state] || parts.join(" · ") || "On our way…";
+    $("guide-progress").textContent = socialText() || NAV_WORDS[msg.state] || parts.join(" · ") || "On our way…";
     $("guide-stop").hidden = false;
     $("guide-stop").disabled = false;
     $("guide-stop").textContent = "Stop";
@@ -172,6 +188,7 @@ new LiveSocket("/ws/status", {
     if (msg.type === "ui_state") onState(msg);
     else if (msg.type === "battery") onBattery(msg);
     else if (msg.type === "nav") onNav(msg);
+    else if (msg.type === "social") onSocial(msg);
     else if (msg.type === "captions") {
       captions = msg.items || [];
       showCaptions();
