@@ -27,6 +27,7 @@ from sage_robot.app.launcher import NodeSpec
 from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import NODES, node_class
 from sage_robot.app.runtime import make_context, run_launcher
+from sage_robot.brain.base import Utterance
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalContext
 from sage_robot.core.config import load_profile
@@ -192,9 +193,10 @@ class SimRobot:
             self.bus.publish(topics.CMD_VEL, Twist(0.0, 0.0))
         return NavigateResult(True, goal.place)
 
-    async def _converse(self, goal: Text, ctx: GoalContext) -> Text:
-        self.questions.append(goal.data)
-        reply = f"You asked about {goal.data.rstrip('?')}. It is on the first floor."
+    async def _converse(self, goal: Text | Utterance, ctx: GoalContext) -> Text:
+        heard = goal.data if isinstance(goal, Text) else goal.text
+        self.questions.append(heard)
+        reply = f"You asked about {heard.rstrip('?')}. It is on the first floor."
         ctx.feedback(Text(reply))
         return Text(reply)
 

@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 
 from sage_robot.app.launcher import Launcher, NodeSpec
+from sage_robot.brain.base import Utterance
 from sage_robot.core import topics
 from sage_robot.core.actions import GoalContext
 from sage_robot.core.bus import Bus
@@ -141,9 +142,10 @@ class WebServer:
                                START_TIMEOUT_S)
         self.node: Any = self.launcher.nodes["web"]
 
-    async def _converse(self, goal: Text, ctx: GoalContext) -> Text:
-        self.questions.append(goal.data)
-        return Text(f"You asked about {goal.data.rstrip('?')}. It is on the first floor.")
+    async def _converse(self, goal: Text | Utterance, ctx: GoalContext) -> Text:
+        heard = goal.data if isinstance(goal, Text) else goal.text
+        self.questions.append(heard)
+        return Text(f"You asked about {heard.rstrip('?')}. It is on the first floor.")
 
     def stop(self) -> None:
         with contextlib.suppress(Exception):

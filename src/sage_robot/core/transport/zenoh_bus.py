@@ -71,7 +71,7 @@ class ZenohTransport(Transport):
         remote = zenoh.Locality.REMOTE
         s = self.session
         self._declared += [
-            s.declare_subscriber(kind_key(self.robot, "topic"), zenoh.handlers.Callback(self._on_sample, indirect=False), allowed_origin=remote),
+            s.declare_subscriber(kind_key(self.robot, "topic"), self._on_sample, allowed_origin=remote),
             s.declare_queryable(kind_key(self.robot, "info", self.zid), self._on_info, allowed_origin=remote),
             s.declare_queryable(kind_key(self.robot, "last"), self._on_last, allowed_origin=remote),
             s.declare_queryable(kind_key(self.robot, "pub"), self._on_pub, allowed_origin=remote),

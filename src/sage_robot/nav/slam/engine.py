@@ -93,6 +93,9 @@ class SlamConfig:
     drop_small_objects_m: float = 0.0
     match: MatchConfig = field(default_factory=MatchConfig)
 
+    def __post_init__(self) -> None:  # a saved session's JSON gives lists back
+        object.__setattr__(self, "submap_edge_strides", tuple(self.submap_edge_strides))
+
 
 @dataclass
 class Keyframe:
@@ -329,6 +332,8 @@ class Slam:
             return False
         sub = PointMap(pts, cfg.match, cfg.loop_search_xy_m, nrm, oriented=cfg.oriented_normals)
         q = voxel_filter(self.keyframes[k].points, cfg.scan_voxel_m)
+        if len(q) < MIN_SCAN_POINTS:  # a keyframe that saw (almost) nothing
+            return False
         guess = self.graph.poses[k]
         init, score = sub.search(
             q,
