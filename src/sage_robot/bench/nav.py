@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from sage_robot.core.errors import SageError
+
 ODOM_SCALE_ERROR = 0.01  # wheel odometry reads 1 % long
 CLUTTER_HEIGHT_M = 1.0  # unmapped boxes as tall as this (the lidar sees them)
 ARRIVED_M = 1.0  # a leg succeeds when the navigator says so and the robot truly stands this close
@@ -298,7 +300,7 @@ async def _drive_all(settings: Any, legs: list[tuple[str, str]], clutter: tuple[
                 report = launcher.health_report()
                 why = "; ".join(f"{name}: {h['last_error']}" for name, h in report.items()
                                 if h.get("state") != "running" and h.get("last_error"))
-                raise RuntimeError(f"nodes did not start: {why or report}")
+                raise SageError(f"nodes did not start: {why or report}")
             await clock.sleep(0.1)
         return await _legs(ctx, launcher, legs, keep)
     finally:
