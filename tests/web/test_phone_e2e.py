@@ -89,19 +89,39 @@ PAGE_PROBE = """
 """.replace("LOUD_RMS", repr(LOUD_RMS))
 
 
-@pytest.fixture(scope="module")
-def question_wav(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The question in the robot's Piper voice, padded with silence, as Chromium's microphone."""
+def spoken_wav(folder: Path, text: str) -> Path:
+    """``text`` in the robot's Piper voice, padded with silence, as Chromium's microphone wants it."""
     from sage_robot.voice.audio_io import resample, write_wav
     from sage_robot.voice.tts import PiperEngine, default_speech, synthesize
 
     if not isinstance(default_speech().engine, PiperEngine):
         pytest.skip("the Piper voice is not installed: pip install 'sage-robot[voice-gpl]'")
-    pcm, rate = synthesize(QUESTION)
+    pcm, rate = synthesize(text)
     words = resample(pcm, rate, WAV_RATE_HZ)
     pad = [np.zeros(round(s * WAV_RATE_HZ), np.int16) for s in (LEAD_SILENCE_S, TAIL_SILENCE_S)]
-    path = tmp_path_factory.mktemp("mic") / "question.wav"
-    return write_wav(path, np.concatenate([pad[0], words, pad[1]]), WAV_RATE_HZ)
+    return write_wav(folder / "speech.wav", np.concatenate([pad[0], words, pad[1]]), WAV_RATE_HZ)
+
+
+@contextlib.contextmanager
+def fake_mic_chromium(wav: Path) -> Iterator[Any]:
+    """Chromium whose microphone says ``wav`` once each time a page opens it."""
+    if not Path(CHROMIUM).exists():
+        pytest.fail(f"{CHROMIUM} is missing: apt-get install chromium (see scripts/apt-packages.txt)")
+    from playwright.sync_api import sync_playwright
+
+    args = [*CHROMIUM_ARGS, f"--use-file-for-fake-audio-capture={wav}%noloop"]
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=CHROMIUM, args=args, headless=True)
+        try:
+            yield b
+        finally:
+            with contextlib.suppress(Exception):
+                b.close()
+
+
+@pytest.fixture(scope="module")
+def question_wav(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return spoken_wav(tmp_path_factory.mktemp("mic"), QUESTION)
 
 
 @pytest.fixture(scope="module")
@@ -114,19 +134,8 @@ def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimRobot]:
 
 @pytest.fixture(scope="module")
 def phone_browser(question_wav: Path) -> Iterator[Any]:
-    """Chromium whose microphone says the question once each time a page opens it."""
-    if not Path(CHROMIUM).exists():
-        pytest.fail(f"{CHROMIUM} is missing: apt-get install chromium (see scripts/apt-packages.txt)")
-    from playwright.sync_api import sync_playwright
-
-    args = [*CHROMIUM_ARGS, f"--use-file-for-fake-audio-capture={question_wav}%noloop"]
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=CHROMIUM, args=args, headless=True)
-        try:
-            yield b
-        finally:
-            with contextlib.suppress(Exception):
-                b.close()
+    with fake_mic_chromium(question_wav) as b:
+        yield b
 
 
 @pytest.fixture

@@ -10,29 +10,25 @@ device playing a WAV made with the robot's own Piper voice.
 
 from __future__ import annotations
 
-import contextlib
 import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 
-from sage_robot.web import tls
-
 from ..support.waits import wait_until
-from .conftest import CHROMIUM, CHROMIUM_ARGS, SimRobot, sim_robot
+from .conftest import SimRobot, sim_robot
+from .test_https import lan_ip
 from .test_phone_e2e import (
     ANSWER_WAIT_MS,
     FAILED,
-    LEAD_SILENCE_S,
     PAGE_PROBE,
     PHONE,
     QUIET_AFTER_SPEECH_MS,
-    TAIL_SILENCE_S,
     WAIT_MS,
-    WAV_RATE_HZ,
+    fake_mic_chromium,
+    spoken_wav,
 )
 
 pytest.importorskip("faster_whisper", reason="the phone test needs: pip install 'sage-robot[voice]'")
@@ -44,25 +40,9 @@ DRIVE_WAIT_S = 60.0  # the robot is moving this long after the reply at the late
 MOVING_MPS = 0.05  # odometry faster than this: the robot drives
 
 
-def lan_ip() -> str:
-    addrs = tls.lan_addresses()
-    if not addrs:
-        pytest.skip("this machine has no non-loopback IPv4 address to reach the robot at")
-    return addrs[0]
-
-
 @pytest.fixture(scope="module")
 def request_wav(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from sage_robot.voice.audio_io import resample, write_wav
-    from sage_robot.voice.tts import PiperEngine, default_speech, synthesize
-
-    if not isinstance(default_speech().engine, PiperEngine):
-        pytest.skip("the Piper voice is not installed: pip install 'sage-robot[voice-gpl]'")
-    pcm, rate = synthesize(REQUEST)
-    words = resample(pcm, rate, WAV_RATE_HZ)
-    pad = [np.zeros(round(s * WAV_RATE_HZ), np.int16) for s in (LEAD_SILENCE_S, TAIL_SILENCE_S)]
-    path = tmp_path_factory.mktemp("mic") / "request.wav"
-    return write_wav(path, np.concatenate([pad[0], words, pad[1]]), WAV_RATE_HZ)
+    return spoken_wav(tmp_path_factory.mktemp("mic"), REQUEST)
 
 
 @pytest.fixture(scope="module")
@@ -74,18 +54,8 @@ def robot(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SimRobot]:
 
 @pytest.fixture(scope="module")
 def chromium(request_wav: Path) -> Iterator[Any]:
-    if not Path(CHROMIUM).exists():
-        pytest.fail(f"{CHROMIUM} is missing: apt-get install chromium (see scripts/apt-packages.txt)")
-    from playwright.sync_api import sync_playwright
-
-    args = [*CHROMIUM_ARGS, f"--use-file-for-fake-audio-capture={request_wav}%noloop"]
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=CHROMIUM, args=args, headless=True)
-        try:
-            yield b
-        finally:
-            with contextlib.suppress(Exception):
-                b.close()
+    with fake_mic_chromium(request_wav) as b:
+        yield b
 
 
 def test_phone_on_the_lan_address_asks_to_be_taken_and_the_robot_guides(
