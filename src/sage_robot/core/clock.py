@@ -17,6 +17,7 @@ import itertools
 import logging
 import os
 import time
+import weakref
 from abc import ABC, abstractmethod
 from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
@@ -136,6 +137,8 @@ class SimClock(Clock):
         due = self._now + max(0.0, latency_s)
         if self._executor is None:
             self._executor = concurrent.futures.ThreadPoolExecutor(JOB_WORKERS, thread_name_prefix="offload")
+            # its idle threads end with the clock (tests make many clocks), not at exit
+            weakref.finalize(self, self._executor.shutdown, wait=False)
         # The caller's context goes along (which node logs), as asyncio.to_thread does.
         thread = self._executor.submit(contextvars.copy_context().run, fn, *args)
         # Time waits for the thread itself, also when its caller was cancelled (a replan given
