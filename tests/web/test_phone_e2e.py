@@ -28,7 +28,10 @@ from .conftest import CHROMIUM, CHROMIUM_ARGS, SimRobot, sim_robot
 pytest.importorskip("faster_whisper", reason="the phone test needs: pip install 'sage-robot[voice]'")
 pytestmark = pytest.mark.browser
 
-QUESTION = "Where is the cafe?"
+QUESTION = "Where are the bathrooms?"
+# Whisper tiny.en on a phone's compressed recording (AAC on Safari) may mishear a word ("cafe"
+# came back once as "capping"): the transcript must say where + bathroom(s), words it keeps.
+HEARD = r"\bwhere\b.*\bbath ?rooms?\b"
 WAV_RATE_HZ = 48_000  # Chromium's capture rate; the WAV is 16-bit PCM mono at it
 LEAD_SILENCE_S = 0.6  # before the words: the recorder starts just after the device opens
 TAIL_SILENCE_S = 4.0  # after them (the file plays once, then the device gives silence)
@@ -208,7 +211,7 @@ def test_phone_speaks_a_question_and_sees_transcript_and_reply(phone: Any, robot
     heard = page.text_content(".bubble.you") or ""
     reply = page.text_content(".bubble.sage") or ""
     page.screenshot(path=str(robot.artifacts / f"talk-phone-e2e-{browser_like}.png"))
-    assert re.search(r"\bwhere\b.*\bcaf[eé]\b", heard, re.IGNORECASE), f"whisper heard {heard!r}"
+    assert re.search(HEARD, heard, re.IGNORECASE), f"whisper heard {heard!r}"
     assert uploads, "the page uploads the recording"
     assert uploads[0].startswith("multipart/form-data"), uploads
     mimes = page.evaluate("window.micProbe.mimeTypes")
