@@ -253,10 +253,31 @@ def captions(robot: SimRobot) -> list[dict[str, Any]]:
     return list(robot.web_node().hub.captions)
 
 
-def test_robot_mic_runs_a_whole_voice_turn_in_the_simulator(phone: Any, robot: SimRobot) -> None:
+# Installed before the face's scripts: every phase the face shows, in order.
+FACE_PHASES = """
+window.phaseLog = [];
+document.addEventListener("DOMContentLoaded", () => {
+  new MutationObserver(() => {
+    const phase = document.body.dataset.phase;
+    if (window.phaseLog[window.phaseLog.length - 1] !== phase) window.phaseLog.push(phase);
+  }).observe(document.body, { attributes: true, attributeFilter: ["data-phase"] });
+});
+"""
+VOICE_TURN = ["listening", "thinking", "speaking"]  # what the face shows of a turn, in order
+
+
+def in_order(wanted: list[str], seen: list[str]) -> bool:
+    """``wanted`` is a subsequence of ``seen``."""
+    it = iter(seen)
+    return all(any(s == w for s in it) for w in wanted)
+
+
+def test_robot_mic_runs_a_whole_voice_turn_in_the_simulator(phone: Any, phone_browser: Any,
+                                                            robot: SimRobot) -> None:
     """The typed words, with "Say it to the robot" on, go into the simulated robot's microphone:
     the voice node hears the wake word, transcribes the question (/sage/heard) and speaks the
-    brain's reply, all of which the kiosk face captions."""
+    brain's reply; the kiosk face goes through listening, thinking and speaking and captions
+    the question and the answer."""
     if "voice" not in robot.node_names:
         pytest.skip("the voice node is not registered here")
     import httpx
@@ -266,26 +287,43 @@ def test_robot_mic_runs_a_whole_voice_turn_in_the_simulator(phone: Any, robot: S
         return bool(resp.json()["available"])
 
     wait_until(mic_open, "the voice node to listen on the simulated microphone", VOICE_WAIT_S)
-    page = open_talk(phone, robot)
-    page.wait_for_selector("#robot-mic", state="visible", timeout=WAIT_MS)
-    page.check("#robot-mic-on")
-    seen = max((c["id"] for c in captions(robot)), default=0)  # the face keeps only the last few
-    page.fill("#question", "where is the cafe")
-    page.click("#ask-btn")
-    page.wait_for_function("Number(document.body.dataset.saidToRobot || 0) >= 1", timeout=WAIT_MS)
-    assert "said to the robot" in (page.text_content("#status") or "")
-    assert page.locator(".bubble").count() == 0, "the answer comes from the robot, not the page"
+    kiosk = phone_browser.new_context(viewport={"width": 1280, "height": 800}, ignore_https_errors=True)
+    kiosk.add_init_script(FACE_PHASES)
+    face = kiosk.new_page()
+    try:
+        face.goto(f"{robot.url}/face")
+        face.wait_for_selector("#link.up", timeout=WAIT_MS)
+        page = open_talk(phone, robot)
+        page.wait_for_selector("#robot-mic", state="visible", timeout=WAIT_MS)
+        page.check("#robot-mic-on")
+        seen = max((c["id"] for c in captions(robot)), default=0)  # the face keeps only the last few
+        page.fill("#question", QUESTION)
+        page.click("#ask-btn")
+        page.wait_for_function("Number(document.body.dataset.saidToRobot || 0) >= 1", timeout=WAIT_MS)
+        assert "said to the robot" in (page.text_content("#status") or "")
+        assert page.locator(".bubble").count() == 0, "the answer comes from the robot, not the page"
 
-    def turn() -> list[dict[str, Any]] | None:
-        new = [c for c in captions(robot) if c["id"] > seen]
-        heard = [c for c in new if c["via"] == "microphone"]
-        spoken = [c for c in new if c["via"] == "voice"]
-        return new if heard and spoken else None
+        def turn() -> list[dict[str, Any]] | None:
+            new = [c for c in captions(robot) if c["id"] > seen]
+            heard = [c for c in new if c["via"] == "microphone"]
+            spoken = [c for c in new if c["via"] == "voice"]
+            return new if heard and spoken else None
 
-    new = wait_until(turn, "the robot to hear the question and speak its answer", VOICE_WAIT_S)
-    heard = next(c["text"] for c in new if c["via"] == "microphone")
-    assert re.search(r"\bcaf[eé]\b", heard, re.IGNORECASE), f"the robot's microphone heard {heard!r}"
-    assert next(c["text"] for c in new if c["via"] == "voice").strip()
+        new = wait_until(turn, "the robot to hear the question and speak its answer", VOICE_WAIT_S)
+        heard = next(c["text"] for c in new if c["via"] == "microphone")
+        assert re.search(HEARD, heard, re.IGNORECASE), f"the robot's microphone heard {heard!r}"
+        answer = next(c["text"] for c in new if c["via"] == "voice")
+        assert answer.strip()
+        face.wait_for_function(f"(({VOICE_TURN!r}).every((p) => window.phaseLog.includes(p)))",
+                               timeout=WAIT_MS)
+        phases = face.evaluate("window.phaseLog")
+        assert in_order(VOICE_TURN, phases), f"the face showed {phases}"
+        # the answer is under the face: live (#reply) while its turn shows, then a caption line
+        face.wait_for_function("(text) => document.querySelector('.captions').textContent.includes(text)",
+                               arg=answer[:40], timeout=WAIT_MS)
+        face.screenshot(path=str(robot.artifacts / "face-robot-mic-turn.png"))
+    finally:
+        kiosk.close()
 
 
 def use_up_questions(robot: SimRobot) -> int:

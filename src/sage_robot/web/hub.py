@@ -11,15 +11,21 @@ The ``captions`` channel is what the kiosk face prints of every turn: the visito
 (the robot's microphone on ``/sage/heard``, a ``/talk`` question), the robot's answers (the
 voice pipeline's reply, a ``/talk`` reply) and announcements (``/sage/say``); its message holds
 the last :data:`CAPTIONS_KEPT` lines, so latest-only delivery loses none of a turn.
+
+The ``ui_state`` channel is the voice pipeline's ``/sage/ui_state``, except while a ``/talk``
+turn (typed or recorded on a phone) is on its way and the robot's own conversation is not
+running: then its phase is ``thinking`` (``"via": "talk"``), so the face shows the robot
+thinking about a phone's question too (:meth:`Hub.talk_turn`).
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import struct
 import time
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -76,6 +82,8 @@ SOCIAL_EVENT_KINDS = frozenset({"slowing_for_people", "pulling_over", "passing_g
 QUEUE_KEPT = 100  # events and audio chunks queued per client before the oldest is dropped
 CAPTIONS_KEPT = 6  # caption lines in the captions channel's message
 CAPTION_MAX_CHARS = 600  # of one caption line
+# Voice phases of the robot's own conversation: a /talk turn never hides them.
+VOICE_TURN_PHASES = frozenset({Phase.LISTENING.value, Phase.THINKING.value, Phase.SPEAKING.value})
 AUDIO_HEADER = struct.Struct("<I")  # binary audio message: sample rate (Hz), then int16 LE PCM
 
 
@@ -125,6 +133,8 @@ class Hub:
         self._caption_seq = 0
         self._voice_reply = ""  # the voice pipeline's reply of the running turn (from ui_state)
         self._voice_captioned = ""  # the last one captioned (ui_state keeps it until the next turn)
+        self._voice_state = views.ui_state_json(UiState())  # the pipeline's last ui_state
+        self._talk_turns = 0  # /talk turns on their way (from the upload to the reply)
 
     def start(self) -> None:
         sub = self.node.subscribe
@@ -226,12 +236,29 @@ class Hub:
         self.set("battery", views.battery_json(msg))
 
     def _on_ui_state(self, msg: UiState) -> None:
-        state = views.ui_state_json(msg)
+        self._voice_state = views.ui_state_json(msg)
+        self._send_ui_state()
+        self._caption_voice_reply(self._voice_state)
+
+    def _send_ui_state(self) -> None:
+        state = self._voice_state
+        if self._talk_turns and state["phase"] not in VOICE_TURN_PHASES:
+            state = {**views.ui_state_json(UiState(Phase.THINKING)), "via": "talk"}
         self.set("ui_state", state)
         # Sent right after it (channels go out in name order): the seed's face page shows its
         # "searching" phase while SAGE's shows "navigating" (each ignores the other's phase).
         self.set("ui_state_seed", views.seed_ui_state(state))
-        self._caption_voice_reply(state)
+
+    @contextlib.contextmanager
+    def talk_turn(self) -> Iterator[None]:
+        """While a ``/talk`` question is transcribed and answered, the face thinks (see module doc)."""
+        self._talk_turns += 1
+        self._send_ui_state()
+        try:
+            yield
+        finally:
+            self._talk_turns -= 1
+            self._send_ui_state()
 
     def caption(self, who: str, text: str, via: str) -> None:
         """A line for the face: ``who`` is "visitor" or "robot"; ``via`` where it came from

@@ -10,7 +10,8 @@
   in the simulator only, the words are spoken into the simulated robot's microphone
   (``/sim/visitor_say``; the voice node synthesizes them), so the whole voice turn runs —
   wake word, listening, thinking, speaking — as for a visitor standing at the robot.
-- Every typed or recorded turn is captioned on the kiosk face (the hub's ``captions``).
+- Every typed or recorded turn is captioned on the kiosk face (the hub's ``captions``), and the
+  face's phase is ``thinking`` from the upload to the reply (the hub's ``talk_turn``).
 - ``GET /api/talk_url`` → ``{"url", "secure"}``: the address of ``/talk`` for a phone (HTTPS
   at the robot's network address when TLS is on); ``GET /api/talk_qr.svg``: it as a QR code
   (the kiosk face shows it).
@@ -106,7 +107,8 @@ def _question(text: Any) -> str:
 async def talk_text(request: Request) -> dict[str, Any]:
     _limit(request)
     question = _question((await json_body(request)).get("text"))
-    reply = await converse(request, question)
+    with state_of(request).hub.talk_turn():
+        reply = await converse(request, question)
     _log.info("visitor question answered", client=client_key(request), chars=len(question))
     return {"transcript": question, "reply": reply}
 
@@ -118,14 +120,15 @@ async def talk_audio(request: Request, audio: UploadFile) -> dict[str, Any]:
     if len(data) > MAX_UPLOAD_BYTES:
         raise HTTPException(status_code=413, detail=f"recording too long (over {MAX_UPLOAD_BYTES} bytes)")
     audio_io, stt = _voice("audio_io"), _voice("stt")
-    try:
-        pcm = await asyncio.to_thread(audio_io.decode_upload, data, audio.filename or "recording")
-        transcript = await asyncio.to_thread(stt.transcribe_pcm, pcm)
-    except SageError as exc:
-        raise HTTPException(status_code=422, detail=str(exc)) from None
-    if transcript.empty:
-        return {"transcript": "", "reply": "", "error": NOTHING_HEARD}
-    reply = await converse(request, transcript.text)
+    with state_of(request).hub.talk_turn():
+        try:
+            pcm = await asyncio.to_thread(audio_io.decode_upload, data, audio.filename or "recording")
+            transcript = await asyncio.to_thread(stt.transcribe_pcm, pcm)
+        except SageError as exc:
+            raise HTTPException(status_code=422, detail=str(exc)) from None
+        if transcript.empty:
+            return {"transcript": "", "reply": "", "error": NOTHING_HEARD}
+        reply = await converse(request, transcript.text)
     return {"transcript": transcript.text, "reply": reply}
 
 
@@ -144,6 +147,16 @@ def robot_mic_available(request: Request) -> bool:
     return bool(node.clock.is_simulated and info is not None and getattr(info, "subscribers", None))
 
 
+def robot_mic_words(wake: str, question: str) -> str:
+    """What the simulated visitor says: the wake phrase as a sentence of its own, then the
+    question ("Hey jarvis. Where is the cafe"); a wake phrase typed in front is not said twice.
+    The voice node pauses after each sentence, as a visitor waits for the robot to listen."""
+    if question.lower().startswith(wake):
+        question = question[len(wake):].lstrip(" ,.!?;:")
+    said = f"{wake[:1].upper()}{wake[1:]}."
+    return f"{said} {question}" if question else said
+
+
 @router.get("/api/talk/robot_mic")
 async def robot_mic(request: Request) -> dict[str, Any]:
     return {"available": robot_mic_available(request), "wake": wake_phrase(request)}
@@ -157,8 +170,7 @@ async def say_to_robot(request: Request) -> dict[str, Any]:
     question = _question((await json_body(request)).get("text"))
     if not robot_mic_available(request):
         raise HTTPException(status_code=409, detail="only the simulated robot has a microphone to speak into")
-    wake = wake_phrase(request)
-    words = question if question.lower().startswith(wake) else f"{wake}, {question}"
+    words = robot_mic_words(wake_phrase(request), question)
     state_of(request).node.bus.publish(topics.SIM_VISITOR_SAY, Text(words))
     _log.info("words spoken into the simulated microphone", client=client_key(request), chars=len(words))
     return {"ok": True, "spoken": words}

@@ -1,4 +1,6 @@
-// Visitors' push-to-talk: hold the button (MediaRecorder WebM) or type; show and play the reply.
+// Visitors' push-to-talk: hold the button (pointer, Space or Enter), or tap it to start and tap
+// again to send (MediaRecorder WebM/MP4), or type; show and play the reply (announced: the
+// conversation is a live region).
 import { $, api, el } from "./common.js";
 
 const MIN_RECORDING_MS = 300; // shorter presses are taps, not speech
@@ -92,55 +94,88 @@ api("/api/talk/robot_mic").then(({ ok, data }) => {
   $("robot-mic").hidden = false;
 });
 
-// ---------------------------------------------------------------- hold to talk
+// ---------------------------------------------------------------- hold to talk, or tap to toggle
+// Press and hold (pointer, or Space/Enter on the focused button) records until release. A press
+// shorter than TAP_MS (or let go before the microphone opened) is a tap: it keeps recording
+// until the next tap (tap-to-toggle, for visitors who cannot hold a button).
+const TAP_MS = 300;
+const LABELS = { off: "Hold to talk", hold: "Listening… release to send", toggle: "Listening… tap to send" };
 let recorder = null;
 let chunks = [];
 let started = 0;
-let holding = false;
+let mode = "off"; // "off", "hold" (pressed), "toggle" (recording after a tap)
+let pressedAt = 0;
+
+function showMode(next) {
+  mode = next;
+  const button = $("ptt");
+  button.textContent = LABELS[next];
+  button.classList.toggle("recording", next !== "off" && recorder !== null);
+  button.setAttribute("aria-pressed", String(next !== "off"));
+  document.body.dataset.ptt = next;
+}
 
 async function startRecording() {
   if (recorder) return;
   if (!navigator.mediaDevices || !window.MediaRecorder) {
+    showMode("off");
     setState("error", "this browser cannot record here (it needs https or localhost); type instead");
     return;
   }
+  let stream;
   try {
-    const stream = await navigator.mediaDevices.getUserMedia({ audio: true });
+    stream = await navigator.mediaDevices.getUserMedia({ audio: true });
     const type = RECORDING_TYPES.find((t) => MediaRecorder.isTypeSupported(t));
     recorder = new MediaRecorder(stream, type ? { mimeType: type } : {});
   } catch (err) {
+    stream?.getTracks().forEach((t) => t.stop());
+    recorder = null;
+    showMode("off");
     setState("error", `no microphone: ${err.message || err}`);
+    return;
+  }
+  if (mode === "off") { // tapped twice while the microphone was opening: nothing to send
+    stream.getTracks().forEach((t) => t.stop());
     recorder = null;
     return;
   }
   chunks = [];
   started = performance.now();
-  if (!holding) started -= MIN_RECORDING_MS; // released while the microphone was opening
   recorder.ondataavailable = (e) => e.data.size && chunks.push(e.data);
   recorder.onstop = () => upload(recorder.stream, recorder.mimeType);
   recorder.start();
-  if (!holding) {
-    recorder.stop();
-    return;
-  }
-  $("ptt").classList.add("recording");
-  $("ptt").textContent = "Listening… release to send";
+  showMode(mode);
 }
 
-function stopRecording() {
-  holding = false;
-  if (!recorder || recorder.state !== "recording") return;
-  recorder.stop();
+/** A press (pointer down, Space or Enter down): start, or in tap mode, send. */
+function press() {
+  if (mode === "toggle") return send();
+  if (mode === "hold") return;
+  pressedAt = performance.now();
+  showMode("hold");
+  startRecording();
+}
+
+/** The press ends: a long hold sends; a tap (or a release before recording) keeps recording. */
+function release() {
+  if (mode !== "hold") return;
+  const tap = performance.now() - pressedAt < TAP_MS || !recorder || recorder.state !== "recording";
+  if (tap) showMode("toggle");
+  else send();
+}
+
+function send() {
+  showMode("off");
+  if (recorder && recorder.state === "recording") recorder.stop();
 }
 
 async function upload(stream, mimeType) {
   stream.getTracks().forEach((t) => t.stop());
   const long = performance.now() - started >= MIN_RECORDING_MS;
   recorder = null;
-  $("ptt").classList.remove("recording");
-  $("ptt").textContent = "Hold to talk";
+  showMode("off");
   if (!long) {
-    setState("error", "hold the button while you speak");
+    setState("error", "too short: hold the button while you speak, or tap, speak and tap again");
     return;
   }
   const form = new FormData();
@@ -193,8 +228,27 @@ else noMicrophone();
 
 ptt.addEventListener("pointerdown", (e) => {
   e.preventDefault();
-  holding = true;
-  startRecording();
+  press();
 });
-for (const ev of ["pointerup", "pointerleave", "pointercancel"]) ptt.addEventListener(ev, stopRecording);
+ptt.addEventListener("pointerup", release);
+for (const ev of ["pointerleave", "pointercancel"]) ptt.addEventListener(ev, () => mode === "hold" && send());
 ptt.addEventListener("contextmenu", (e) => e.preventDefault());
+const PRESS_KEYS = new Set([" ", "Enter"]);
+ptt.addEventListener("keydown", (e) => {
+  if (!PRESS_KEYS.has(e.key)) return;
+  e.preventDefault(); // no click: the key is the press
+  if (!e.repeat) press();
+});
+ptt.addEventListener("keyup", (e) => {
+  if (!PRESS_KEYS.has(e.key)) return;
+  e.preventDefault();
+  release();
+});
+ptt.addEventListener("blur", () => mode === "hold" && send()); // focus moved away while held
+// A click with no pointer or key behind it (a screen reader's activation) is a tap.
+ptt.addEventListener("click", (e) => {
+  if (e.detail !== 0) return;
+  press();
+  release();
+});
+showMode("off");
