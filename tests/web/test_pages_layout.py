@@ -6,6 +6,9 @@ the bottom, and with the e-stop banner showing, which overlays instead of pushin
 down). Screenshots of every page at every size land in $SAGE_ARTIFACTS/web/layout (default
 /tmp/sage-artifacts/web/layout).
 
+Every control (button, link, field, slider, ...) in Chromium's accessibility tree has a name;
+the teleop wheel, pedals, joystick, speed slider and E-STOP by the names they must have.
+
 Accessibility: axe-core (from the npm registry, pinned in scripts/bootstrap.sh, installed
 into tests/web/.axe) runs inside each page: no serious or critical violation (WCAG 2.1 AA
 contrast, labels, ARIA). Every violation found, of any impact, is written to
@@ -303,5 +306,55 @@ def test_place_goal_marker_and_zoom(context: Any, robot: Any, shots: Path) -> No
         page.click("#zoom-fit")
         assert abs(page.evaluate("window.sageMap.view().scale") - before) < 1e-6
         assert not page.is_checked("#follow")
+    finally:
+        page.close()
+
+
+# ---------------------------------------------------------------- every control has a name
+# Roles a visitor or operator operates; each needs an accessible name (what a screen reader says).
+CONTROL_ROLES = frozenset({"button", "checkbox", "combobox", "link", "listbox", "menuitem", "radio",
+                           "searchbox", "slider", "spinbutton", "switch", "tab", "textbox"})
+# Controls that are not native form elements, by the names the teleop page must give them.
+TELEOP_CONTROLS = [("slider", "Steering wheel"), ("button", "Brake pedal"), ("button", "Gas pedal"),
+                   ("group", "Touch joystick"), ("slider", "Speed"), ("button", "Emergency stop")]
+
+
+def controls(page: Any) -> tuple[int, list[str]]:
+    """How many controls Chromium's accessibility tree (what screen readers get) has, and those
+    of them without a name."""
+    cdp = page.context.new_cdp_session(page)
+    try:
+        found, count = [], 0
+        for node in cdp.send("Accessibility.getFullAXTree")["nodes"]:
+            role = (node.get("role") or {}).get("value")
+            name = str((node.get("name") or {}).get("value") or "").strip()
+            if node.get("ignored") or role not in CONTROL_ROLES:
+                continue
+            count += 1
+            if name:
+                continue
+            described = cdp.send("DOM.describeNode", {"backendNodeId": node["backendDOMNodeId"]})["node"]
+            attrs = described.get("attributes", [])
+            found.append(f"{role} <{described.get('localName')} {' '.join(attrs)}>")
+        return count, found
+    finally:
+        cdp.detach()
+
+
+@pytest.mark.parametrize("name", list(PAGES))
+def test_every_control_is_labelled(context: Any, robot: Any, name: str) -> None:
+    page = open_page(context, robot, name)
+    try:
+        if name in ("teleop", "admin"):  # the place buttons have arrived
+            page.wait_for_selector("#places button, #places tr", timeout=WAIT_MS)
+        page.evaluate(SETTLE)
+        count, unnamed = controls(page)
+        assert count > 0, f"{name}: no controls in the accessibility tree"
+        assert unnamed == [], f"{name}: controls without a name"
+        if name == "teleop":
+            for role, label in TELEOP_CONTROLS:
+                assert page.get_by_role(role, name=label).count() == 1, f"no {role} named {label!r}"
+        if name == "talk":
+            assert page.get_by_role("button", name="Hold to talk").get_attribute("aria-pressed") == "false"
     finally:
         page.close()
