@@ -343,10 +343,16 @@ def controls(page: Any) -> tuple[int, list[str]]:
 
 @pytest.mark.parametrize("name", list(PAGES))
 def test_every_control_is_labelled(context: Any, robot: Any, name: str) -> None:
+    from sage_robot.core import topics
+    from sage_robot.core.msgs.nav import NavigateFeedback, NavState
+
     page = open_page(context, robot, name)
     try:
         if name in ("teleop", "admin"):  # the place buttons have arrived
             page.wait_for_selector("#places button, #places tr", timeout=WAIT_MS)
+        if name == "face":  # its controls show while guiding (idle, it has none)
+            robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.DRIVING, "HESSE_CENTER", 12.0, 20.0))
+            page.wait_for_selector("#guide-stop", state="visible", timeout=WAIT_MS)
         page.evaluate(SETTLE)
         count, unnamed = controls(page)
         assert count > 0, f"{name}: no controls in the accessibility tree"
@@ -357,4 +363,6 @@ def test_every_control_is_labelled(context: Any, robot: Any, name: str) -> None:
         if name == "talk":
             assert page.get_by_role("button", name="Hold to talk").get_attribute("aria-pressed") == "false"
     finally:
+        if name == "face":
+            robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.IDLE))
         page.close()
