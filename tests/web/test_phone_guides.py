@@ -1,8 +1,8 @@
 """Issue #21's phone test as written: a phone-sized Chromium on the robot's **non-loopback**
 address over HTTPS, its (fake) microphone saying "take me to the bathrooms" (the issue's "cafe" came back as
 "capping" once from Whisper tiny.en on a compressed recording): hold to talk → the
-transcript and the reply on the phone, the robot starts guiding, and the kiosk face shows the
-caption and the guiding card.
+transcript and the reply on the phone, the robot starts guiding, and the kiosk face thinks
+while the question is answered, then shows the caption and the guiding card.
 
 The robot is the simulator (real navigator, real offline brain, web on HTTPS listening on every
 address); speech to text is the real bundled Whisper; the microphone is Chromium's fake capture
@@ -23,6 +23,7 @@ from .conftest import SimRobot, sim_robot
 from .test_https import lan_ip
 from .test_phone_e2e import (
     ANSWER_WAIT_MS,
+    FACE_PHASES,
     FAILED,
     PAGE_PROBE,
     PHONE,
@@ -70,9 +71,11 @@ def test_phone_on_the_lan_address_asks_to_be_taken_and_the_robot_guides(
     phone_ctx = chromium.new_context(viewport=PHONE, ignore_https_errors=True, has_touch=True,
                                      is_mobile=True, permissions=["microphone"])
     phone_ctx.add_init_script(PAGE_PROBE)
+    kiosk_ctx.add_init_script(FACE_PHASES)
     try:
         face = kiosk_ctx.new_page()
         face.goto(f"{robot.url}/face")
+        face.wait_for_selector("#link.up", timeout=WAIT_MS)  # it hears the robot before the question
         phone = phone_ctx.new_page()
         phone.goto(f"{base}/talk")
         assert phone.evaluate("window.isSecureContext") is True, "https at the LAN address"
@@ -97,6 +100,8 @@ def test_phone_on_the_lan_address_asks_to_be_taken_and_the_robot_guides(
         assert reply.strip(), "the phone shows the robot's reply"
         face.wait_for_function(  # the kiosk face captions the turn
             "(text) => document.body.innerText.includes(text)", arg=reply.strip()[:40], timeout=WAIT_MS)
+        phases = face.evaluate("window.phaseLog")
+        assert "thinking" in phases, f"the face thinks while the phone's question is answered: {phases}"
 
         def driving() -> bool:
             odom = robot.odom
