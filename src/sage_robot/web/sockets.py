@@ -2,11 +2,11 @@
 
 - ``/ws/teleop`` (operator): control in, e-stop, ping; see :mod:`teleop`.
 - ``/ws/status`` (public): battery, ui_state, e-stop state, ping/pong — the seed's; and for
-  the kiosk face the navigation state (``nav``, with the destination's ``title``) and the
-  ``captions`` of recent turns.
+  the kiosk face the navigation state (``nav``, with the destination's ``title``), the
+  ``captions`` of recent turns, the visitor's ``tour`` and the navigator's ``social`` events.
 - ``/ws/doa`` (public): speaker direction for the face's pupils.
 - ``/ws/live`` (operator): the live map's layers (map, pose, scan, plan, goal, people,
-  localization health, navigation state, events).
+  localization health, the navigator's costmap, navigation state, events).
 - ``/ws/camera`` (operator): JPEG frames as binary messages, latest frame only.
 
 Every socket checks ``Origin``; operator sockets also need the session cookie (the
