@@ -165,3 +165,18 @@ def test_voice_reply_is_captioned_once_when_its_turn_ends(robot: Any) -> None:
     robot.publish(topics.UI_STATE, UiState(Phase.IDLE, llm_tokens="Next one."))
     wait_until(lambda: "Next one." in voice_captions(), "the next turn's caption", 10.0)
     assert voice_captions().count(reply) == 1
+
+
+def test_battery_shows_to_an_operator_logged_in_on_that_browser(browser: Any, robot: Any) -> None:
+    context = browser.new_context(viewport={"width": 1280, "height": 800})
+    try:
+        resp = context.request.post(f"{robot.url}/api/login", data={"password": robot.password},
+                                    headers={"Origin": robot.url})
+        assert resp.ok, resp.text()
+        face = context.new_page()
+        face.goto(f"{robot.url}/face")
+        face.wait_for_function("document.getElementById('battery').textContent !== '—'", timeout=WAIT_MS)
+        face.wait_for_selector("#battery-wrap", state="visible", timeout=WAIT_MS)
+        assert (face.text_content("#battery") or "").endswith("%")
+    finally:
+        context.close()

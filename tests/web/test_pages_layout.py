@@ -289,6 +289,12 @@ def test_place_goal_marker_and_zoom(context: Any, robot: Any, shots: Path) -> No
         assert marker["title"] == title
         assert title in (page.text_content("#nav") or "")
         assert page.get_attribute("#nav", "title") == code
+        # said to screen readers once (a polite live region), by its title
+        assert page.text_content("#announce") == f"navigation: driving → {title}"
+        assert page.get_attribute("#announce", "aria-live") == "polite"
+        legend = page.eval_on_selector_all(".legend li:not([hidden])",
+                                           "(lis) => lis.map((li) => li.textContent)")
+        assert legend == ["robot", "path", "goal", "place", "person", "lidar"], legend
         page.locator("#map").scroll_into_view_if_needed()
         page.screenshot(path=str(shots / "teleop-place-goal.png"))
         robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.IDLE))
@@ -365,4 +371,71 @@ def test_every_control_is_labelled(context: Any, robot: Any, name: str) -> None:
     finally:
         if name == "face":
             robot.publish(topics.NAV_STATE, NavigateFeedback(NavState.IDLE))
+        page.close()
+
+
+def test_set_pose_confirmed_moves_the_map_and_follows_the_robot(context: Any, robot: Any) -> None:
+    """"Set pose" confirmed sends the pressed point facing the drag (here the robot's own pose,
+    so localization is not disturbed); "Move map" drags the view and sends nothing; "Follow
+    the robot" keeps it in the middle."""
+    import math
+
+    from sage_robot.core import topics
+    from sage_robot.core.msgs import PoseWithCovariance
+
+    from ..support.waits import wait_until
+
+    poses: list[PoseWithCovariance] = []
+    sub = robot.call(lambda: robot.bus.subscribe(topics.INITIAL_POSE, PoseWithCovariance, poses.append))
+    page = context.new_page()
+    page.add_init_script(FETCH_PROBE)
+    page.goto(f"{robot.url}/teleop")
+    try:
+        page.wait_for_selector("#map[data-map-version]", timeout=WAIT_MS)
+        page.wait_for_function("window.sageMap.layers.pose", timeout=WAIT_MS)
+        page.locator("#map").scroll_into_view_if_needed()
+        box = page.locator("#map").bounding_box()
+        assert box is not None
+        pose = page.evaluate("window.sageMap.layers.pose")
+        px, py = page.evaluate(f"window.sageMap.toPx({pose['x']}, {pose['y']})")
+        ahead = (math.cos(pose["theta"]) * 60, -math.sin(pose["theta"]) * 60)  # screen y points down
+        page.check("input[name=tool][value=pose]")
+        page.mouse.move(box["x"] + px, box["y"] + py)
+        page.mouse.down()
+        page.mouse.move(box["x"] + px + ahead[0], box["y"] + py + ahead[1], steps=5)
+        page.mouse.up()
+        page.wait_for_selector("#pose-confirm:not([hidden])", timeout=WAIT_MS)
+        assert poses == [], "nothing is sent before the confirmation"
+        page.click("#pose-yes")
+        wait_until(lambda: poses, "the confirmed pose on /initialpose", 10.0)
+        sent_pose = poses[-1].pose
+        scale = page.evaluate("window.sageMap.view().scale")  # px per metre
+        assert math.hypot(sent_pose.x - pose["x"], sent_pose.y - pose["y"]) < 2.0 / scale
+        assert abs(math.remainder(sent_pose.theta - pose["theta"], 2 * math.pi)) < 0.05
+        page.wait_for_function("document.getElementById('goal-msg').textContent.startsWith('pose set')",
+                               timeout=WAIT_MS)
+        # "Move map": the world point under the middle moves with the drag; nothing is sent
+        page.check("input[name=tool][value=pan]")
+        page.click("#zoom-in")
+        calls = len(page.evaluate("window.sageCalls"))
+        middle = "(() => { const m = window.sageMap, v = m.view(); return m.toWorld(v.w / 2, v.h / 2); })()"
+        before = page.evaluate(middle)
+        cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+        page.mouse.move(cx, cy)
+        page.mouse.down()
+        page.mouse.move(cx + 80, cy, steps=5)
+        page.mouse.up()
+        after = page.evaluate(middle)
+        scale = page.evaluate("window.sageMap.view().scale")
+        assert abs((before[0] - after[0]) - 80 / scale) < 1.0 / scale, (before, after)
+        assert abs(before[1] - after[1]) < 1.0 / scale
+        assert len(page.evaluate("window.sageCalls")) == calls, "a pan sends nothing"
+        # follow: the robot in the middle of the map
+        page.check("#follow")
+        x, y, w, h = page.evaluate("""(() => { const m = window.sageMap, v = m.view(), p = m.layers.pose;
+                                       return [...m.toPx(p.x, p.y, v), v.w, v.h]; })()""")
+        assert abs(x - w / 2) < 1, (x, w)
+        assert abs(y - h / 2) < 1, (y, h)
+    finally:
+        robot.call(sub.close)
         page.close()

@@ -173,14 +173,20 @@ export function batteryLow(msg) {
   return pct !== null && pct !== undefined && pct <= BATTERY_LOW_PCT && !msg.is_charging;
 }
 
+let lastBattery = null;
+
 function onBattery(msg) {
+  lastBattery = msg;
   $("battery").textContent = batteryText(msg);
   const low = batteryLow(msg);
   $("battery").classList.toggle("low", low);
   $("battery-wrap").hidden = !(low || operator);
 }
 
-api("/api/whoami").then(({ ok, data }) => (operator = Boolean(ok && data.operator)));
+api("/api/whoami").then(({ ok, data }) => {
+  operator = Boolean(ok && data.operator);
+  if (lastBattery) onBattery(lastBattery); // it may have come first
+});
 
 new LiveSocket("/ws/status", {
   onState: (up) => $("link").classList.toggle("up", up),
