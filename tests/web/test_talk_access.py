@@ -5,6 +5,7 @@ Chromium against the real web server (a stand-in brain behind the ``converse`` a
   tap-to-toggle (a tap, a key press or a screen reader's click starts recording, the next one
   sends), not only as a held pointer.
 - The reply and the page's state are in live regions (screen readers say them).
+- A microphone the browser blocks for the site is said before any press; typing stays.
 - While a ``/talk`` question is on its way, the kiosk face shows ``thinking``; the robot's own
   conversation (listening, thinking, speaking on ``/sage/ui_state``) is shown over it.
 
@@ -211,3 +212,34 @@ def test_a_talk_question_makes_the_face_think(browser: Any, phone: Any, server: 
         face.close()
         on_loop(server, lambda: bus.actions.unserve(topics.CONVERSE))
         on_loop(server, lambda: bus.actions.serve(topics.CONVERSE, stand_in.handler))
+
+
+# What the browser's Permissions API answers about the microphone, as after a visitor said no once
+# (Chromium's own prompt is bypassed in the tests: --use-fake-ui-for-media-stream).
+MIC_DENIED = """
+(() => {
+  const query = navigator.permissions.query.bind(navigator.permissions);
+  window.micPermission = { state: "denied", onchange: null };
+  navigator.permissions.query = (d) =>
+    (d.name === "microphone" ? Promise.resolve(window.micPermission) : query(d));
+})();
+"""
+
+
+def test_blocked_microphone_is_said_before_any_press_and_typing_stays(phone: Any, server: WebServer) -> None:
+    phone.add_init_script(MIC_DENIED)
+    page = phone.new_page()
+    page.goto(url(server, "/talk"))
+    page.wait_for_function("document.body.dataset.mic === 'blocked'", timeout=WAIT_MS)
+    assert page.is_visible("#mic-note")
+    assert "blocks the microphone" in (page.inner_text("#mic-note") or "")
+    assert "type instead" in (page.inner_text("#mic-note") or "")
+    assert page.is_hidden("#ptt")
+    page.fill("#question", "where is the cafe?")
+    page.click("#ask-btn")
+    replied(page)
+    # allowed in the site settings: the button comes back
+    page.evaluate("window.micPermission.state = 'granted'; window.micPermission.onchange()")
+    page.wait_for_function("document.body.dataset.mic === 'available'", timeout=WAIT_MS)
+    assert page.is_visible("#ptt")
+    assert page.is_hidden("#mic-note")

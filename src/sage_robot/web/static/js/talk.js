@@ -223,8 +223,36 @@ function noMicrophone() {
   });
 }
 
-if (micAvailable()) document.body.dataset.mic = "available";
-else noMicrophone();
+// The microphone blocked for this site (the visitor said no once, or a policy): said before any
+// press as well, and undone when it is allowed again (the Permissions API tells the page).
+const BLOCKED = "This browser blocks the microphone for this page: allow it in the site settings "
+  + "(the icon by the address) to talk; you can type instead.";
+
+function micBlocked(blocked) {
+  ptt.hidden = blocked;
+  ptt.disabled = blocked;
+  document.body.dataset.mic = blocked ? "blocked" : "available";
+  $("mic-note").hidden = !blocked;
+  $("mic-note").textContent = blocked ? BLOCKED : "";
+}
+
+async function watchPermission() {
+  if (!navigator.permissions?.query) return; // the press will tell
+  try {
+    const status = await navigator.permissions.query({ name: "microphone" });
+    micBlocked(status.state === "denied");
+    status.onchange = () => micBlocked(status.state === "denied");
+  } catch {
+    // this browser cannot be asked about the microphone: the press will tell
+  }
+}
+
+if (micAvailable()) {
+  document.body.dataset.mic = "available";
+  watchPermission();
+} else {
+  noMicrophone();
+}
 
 ptt.addEventListener("pointerdown", (e) => {
   e.preventDefault();
