@@ -210,6 +210,9 @@ def test_kb_admin_page_is_styled_with_a_way_back(context: Any, robot: Any, shots
             page.screenshot(path=str(shots / f"kb-admin-{size}.png"))
             scroll_w, inner_w = page.evaluate(SCROLL_WIDTH)
             assert scroll_w <= inner_w, f"/kb/admin at {w}x{h} is {scroll_w} px wide"
+        count, unnamed = controls(page)
+        assert count > 0
+        assert unnamed == [], "/kb/admin: controls without a name"
         found = axe_violations(page)
     finally:
         page.close()
