@@ -154,6 +154,17 @@ def test_places_show_human_titles(context: Any, robot: Any) -> None:
         assert names == ["Guelly Delly", "ECE Lab 1", "3D Printing Lab", kb_pair, None]
     finally:
         page.close()
+    admin = open_page(context, robot, "admin")  # its places table: titles, code names in tooltips
+    try:
+        admin.wait_for_selector("#places tr", timeout=WAIT_MS)
+        rows = admin.evaluate("""[...document.querySelectorAll('#places tr[data-place]')].map(
+            (tr) => [tr.dataset.place, tr.cells[0].textContent, tr.cells[0].title])""")
+        assert rows
+        for code, text, tip in rows:
+            assert "_" not in text, f"{code} shows its code name on /admin: {text!r}"
+            assert tip == code, tip
+    finally:
+        admin.close()
 
 
 # ---------------------------------------------------------------- accessibility (axe-core)
