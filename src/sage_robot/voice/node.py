@@ -51,6 +51,11 @@ if TYPE_CHECKING:
 
 T = TypeVar("T")
 # Where the simulated speaker writes WAV files (optional)
+# On the simulated clock the models load as a lockstep job that lands at this simulated time
+# after the node starts (the world steps on beside it, then waits for it if need be), so the
+# voice comes up at the same simulated moment on every run, whatever the machine's load.
+MODEL_LOAD_SIM_S = 3.0
+
 SIM_OUT_DIR_KEY: ResourceKey[str | Path] = ResourceKey("voice_sim_out_dir")
 # The simulated microphone and speaker, once set up
 SIM_AUDIO_KEY: ResourceKey[tuple[SimMicrophone, SimSpeaker]] = ResourceKey("voice_sim_audio", tuple)
@@ -163,7 +168,10 @@ class VoiceNode(Node):
     async def _start_pipeline(self) -> None:
         """Load the models off the loop (seconds), then run the pipeline forever."""
         try:
-            models = await in_load_thread(VoiceModels.load, self.vs)
+            if self.clock.is_simulated:
+                models = await self.clock.offload(VoiceModels.load, self.vs, latency_s=MODEL_LOAD_SIM_S)
+            else:
+                models = await in_load_thread(VoiceModels.load, self.vs)
             self._open_audio()
         except (ConfigError, DeviceNotConnectedError) as exc:
             self.log.error("voice pipeline unavailable", error=str(exc))
