@@ -76,7 +76,7 @@ def test_scan_hits_on_a_mapped_wall_seen_from_a_slightly_wrong_pose_are_the_wall
     assert cm.cost_at(wall_x - 0.07 - 0.5, 2.0)[()] < INSCRIBED
     # a person 0.3 m from that wall is still an obstacle
     cm.update_scan((1.0, 2.0, 0.0), np.array([0.0]), np.array([4.6]), 12.0)
-    assert cm.cost_at(5.6, 2.0)[()] == LETHAL
+    assert cm.cost_at(5.62, 2.0)[()] == LETHAL  # the cell just beyond the return (the person's body)
 
 
 def test_clear_obstacles() -> None:

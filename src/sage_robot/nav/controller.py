@@ -1,14 +1,16 @@
 """Regulated Pure Pursuit (Macenski et al. 2023; Nav2's ``RegulatedPurePursuitController``).
 
-Each step: prune the path behind the robot, pick the carrot ``lookahead_m`` ahead, and
-steer on the arc through it (curvature ``2 y / L²`` in the robot frame). The speed is
-then regulated: down on tight curves (radius below ``REGULATED_MIN_RADIUS_M``), near
-obstacles (clearance beyond the inscribed radius, here and up to 0.3 m ahead, below
-``COST_SCALING_DIST_M``: through a gap only 0.1 m wider than the robot it creeps at
-``MIN_REGULATED_SPEED_MPS``), near the goal, and to the speed-zone
-limit. When the carrot is too far off to the side the robot rotates in place. The arc
-is checked ``COLLISION_HORIZON_S`` ahead on the costmap; a collision means stop and
-report ``blocked``. The forward speed is never negative (the seed's robot never reverses).
+Each step: prune the path behind the robot, pick the carrot ``lookahead_m`` ahead (less in
+tight places: down to ``MIN_LOOKAHEAD_M`` as the clearance falls, so a narrow gap's path is
+followed, not cut), and steer on the arc through it (curvature ``2 y / L²`` in the robot
+frame). The speed is then regulated: down on tight curves (radius below
+``REGULATED_MIN_RADIUS_M``), near obstacles (clearance beyond the inscribed radius, here and up
+to 0.3 m ahead, below ``COST_SCALING_DIST_M``: through a gap only 0.1 m wider than the robot it
+creeps at ``MIN_REGULATED_SPEED_MPS``), near the goal, and to the speed-zone limit. When the
+carrot is too far off to the side the robot rotates in place. The arc is checked
+``COLLISION_HORIZON_S`` ahead on the costmap; a collision means stop and report ``blocked``
+(after turning in place toward a near carrot, if the robot did not face it). The forward speed
+is never negative (the seed's robot never reverses).
 
 Conventions: map frame, metres, radians; the path is an (N, 2) array of (x, y).
 """
@@ -39,6 +41,7 @@ MIN_COLLISION_CHECK_M = 0.5  # look at least this far ahead, however slow the co
 MIN_LOOKAHEAD_M = 0.3
 CLOSE_LOOKAHEAD_M = 0.4  # fallback carrot when the full-lookahead arc would collide (m)
 CLOSE_HOLD_M = 0.4  # once on the fallback carrot, keep to it for this much of the path (m)
+FACE_ALIGNED_RAD = 0.15  # blocked, the robot turns toward the short carrot until this near (rad)
 
 
 @dataclass(frozen=True)
@@ -104,14 +107,42 @@ class PurePursuit:
             self._at_goal_xy = True
             return self._align(th)
         if self._i < self._close_until:  # hugging the path: stay on the short carrot a while
-            return self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap)
-        cmd = self._pursue(pose, max(MIN_LOOKAHEAD_M, min(p.lookahead_m, dist_goal)), dist_goal, costmap)
+            return self._face_if_blocked(pose, self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap))
+        lookahead = max(MIN_LOOKAHEAD_M, min(self._lookahead(pose, costmap), dist_goal))
+        cmd = self._pursue(pose, lookahead, dist_goal, costmap)
         if cmd.blocked:
             # the long arc cuts a corner the path goes around: hug the path with a short carrot
             # (and keep to it for CLOSE_HOLD_M, or the two carrots can turn the robot to and fro)
             cmd = self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap)
             self._close_until = self._i + max(1, round(CLOSE_HOLD_M / self._spacing))
-        return cmd
+        return self._face_if_blocked(pose, cmd)
+
+    def _lookahead(self, pose: tuple[float, float, float], costmap: Costmap | None) -> float:
+        """The carrot distance: ``lookahead_m``, shortened in tight places (clearance beyond the
+        inscribed radius under ``COST_SCALING_DIST_M``) down to ``MIN_LOOKAHEAD_M`` at none, so
+        the robot follows a path through a narrow gap instead of cutting its corners (as Nav2's
+        lookahead shrinks with the regulated speed)."""
+        full = self.params.lookahead_m
+        if costmap is None:
+            return full
+        # where the robot stands, not ahead of it: turning in place must not move the carrot (a
+        # carrot that changed with the heading turned the robot to and fro for good)
+        d = costmap.distance_at(pose[0], pose[1]) - costmap.inscribed_m
+        if d >= COST_SCALING_DIST_M:
+            return full
+        return MIN_LOOKAHEAD_M + (full - MIN_LOOKAHEAD_M) * max(d, 0.0) / COST_SCALING_DIST_M
+
+    def _face_if_blocked(self, pose: tuple[float, float, float], cmd: Command) -> Command:
+        """Blocked on the short carrot's arc while not facing it: turn in place toward it first (a
+        round robot may; the straight way there can be free where the arc from here is not)."""
+        if not cmd.blocked:
+            return cmd
+        x, y, th = pose
+        carrot = self._carrot(x, y, CLOSE_LOOKAHEAD_M)
+        err = wrap_angle(math.atan2(carrot[1] - y, carrot[0] - x) - th)
+        if abs(err) <= FACE_ALIGNED_RAD:
+            return cmd
+        return Command(0.0, math.copysign(min(ROTATE_SPEED_RADPS, self.params.max_w), err), rotating=True)
 
     def _pursue(self, pose: tuple[float, float, float], lookahead: float, dist_goal: float,
                 costmap: Costmap | None) -> Command:

@@ -36,6 +36,7 @@ NO_INFORMATION = 255
 OCCUPIED_MIN = 65  # map cell value (0..100) from which a cell is an obstacle (map_saver's)
 OBSTACLE_RANGE_M = 5.0  # Nav2 obstacle_max_range: beams beyond this mark nothing
 RAYTRACE_RANGE_M = 6.0  # Nav2 raytrace_max_range: free space is cleared up to here
+MARK_BEYOND_CELLS = 0.5  # a beam marks the cell this far (cells) beyond its return
 NO_SPEED_LIMIT = 1.0
 # Scan obstacles are padded by this much: a lidar at knee height sees a person's legs
 # (~0.07 m circles 0.11 m either side of the body's centre), not the 0.25 m body around them.
@@ -47,6 +48,12 @@ OBSTACLE_PAD_M = 0.2
 # there (dock -> cafe: blocked 4 times in 4); 0.1 m still boxed in at a junction.
 WALL_SNAP_M = 0.1
 WALL_PAD_M = 0.15  # walls get a thinner pad than legs, and still a margin for the pose error
+# The hard core (the inscribed radius) of a hit on a mapped wall is one cell thinner: such a hit
+# lands in the free cell before the wall (range noise; the notches of a diagonal wall's cell
+# staircase), so every diagonal wall grew a cell and a passage 0.66 m wide (willow-2010's diagonal
+# wall, the TurtleBot sandbox) shut for the forward check (issue #20). The map's own wall keeps
+# its full inscribed radius; the soft pad still costs.
+WALL_CORE_SLACK_CELLS = 1.0
 # Scan blobs at most this big (bounding box side, m; marks within BLOB_JOIN_M joined) are
 # people or their legs (two 0.07 m legs 0.22 m apart striding 0.14 m; a 0.5 m body's arc) and
 # get the hard pad. Larger blobs get the soft pad: the band counts as SOFT_PAD_CLEAR_M beyond
@@ -54,6 +61,7 @@ WALL_PAD_M = 0.15  # walls get a thinner pad than legs, and still a margin for t
 PERSON_BLOB_M = 0.55
 BLOB_JOIN_M = 0.2
 SOFT_PAD_CLEAR_M = 0.02
+SOFT_PAD_MIN_M = 0.005  # ... rising from this beyond the inscribed radius at the obstacle's edge
 SPECKLE_MAX_M2 = 0.5  # unknown blobs smaller than this (m^2) inside the map are noise: free
 ATTACHED_M = 0.3  # a small blob this near a wall or a larger blob belongs to it (m)
 GAP_MARGIN_M = 0.2  # beside a padded person, a gap keeps at least this much open beyond the robot (m)
@@ -277,7 +285,11 @@ class Costmap:
             ok = self.geom.inside(rows, cols)
             self.obstacles[rows[ok], cols[ok]] = False
         mark = finite & (r < OBSTACLE_RANGE_M)
-        hr, hc = self.geom.to_cell(sx + ca[mark] * r[mark], sy + sa[mark] * r[mark])
+        # a return comes from the obstacle's surface: the cell that holds the obstacle is the one
+        # just beyond it (the endpoint's own cell is, half the time, the free cell in front of a
+        # wall: every wall grew a cell toward the robot, and a 0.56 m gap shut; issue #20)
+        hit = r[mark] + MARK_BEYOND_CELLS * self.geom.resolution
+        hr, hc = self.geom.to_cell(sx + ca[mark] * hit, sy + sa[mark] * hit)
         ok = self.geom.inside(hr, hc)
         self.obstacles[hr[ok], hc[ok]] = True
         self.obstacles &= ~self.static  # walls belong to the static layer
@@ -323,9 +335,9 @@ class Costmap:
         lethal, wall = self.obstacles[r0:r1, c0:c1], self.wall_zone[r0:r1, c0:c1]
         people = person_sized(lethal & ~wall, self.geom.resolution,
                               self.static[r0:r1, c0:c1] | (lethal & wall))
-        layers = ((people, OBSTACLE_PAD_M, True), (lethal & ~wall & ~people, OBSTACLE_PAD_M, False),
-                  (lethal & wall, WALL_PAD_M, False))
-        for marks, pad, hard in layers:
+        layers = ((people, OBSTACLE_PAD_M, True, 0.0), (lethal & ~wall & ~people, OBSTACLE_PAD_M, False, 0.0),
+                  (lethal & wall, WALL_PAD_M, False, WALL_CORE_SLACK_CELLS * self.geom.resolution))
+        for marks, pad, hard, slack in layers:
             if not marks.any():
                 continue
             raw = ndimage.distance_transform_edt(~marks).astype(np.float32) * self.geom.resolution
@@ -333,11 +345,22 @@ class Costmap:
                 others = lethal | self.static[r0:r1, c0:c1] | self.keepout[r0:r1, c0:c1]
                 dist = self._capped_pad(marks, others, raw, pad)
             else:  # the pad costs, but never makes a cell the robot fits in impassable
-                dist = np.maximum(raw - pad, 0.0)
-                dist = np.maximum(dist, np.minimum(raw, self.inscribed_m + SOFT_PAD_CLEAR_M))
+                dist = np.maximum(raw - pad, self._soft(raw, pad, slack))
             cost = costs_from_distance(dist, marks, self.inscribed_m, self.inflation_m, self.cost_scaling)
             self.cost[r0:r1, c0:c1] = np.maximum(self.cost[r0:r1, c0:c1], cost)
             self.dist[r0:r1, c0:c1] = np.minimum(self.dist[r0:r1, c0:c1], dist)
+
+    def _soft(self, raw: np.ndarray, pad: float, slack: float) -> np.ndarray:
+        """The distance a soft pad reports: inside the inscribed radius (less ``slack``) the true
+        one; across the padded band from just beyond the inscribed radius up to
+        ``SOFT_PAD_CLEAR_M`` beyond it, rising with the true distance, so the band costs (a little
+        below inscribed) and the planner still keeps to the middle of a gap (a flat band let
+        paths hug one side of a narrow passage, and the forward check stopped the robot there)."""
+        ins = self.inscribed_m
+        slope = (SOFT_PAD_CLEAR_M - SOFT_PAD_MIN_M) / (pad + SOFT_PAD_CLEAR_M)
+        rise = np.clip(raw - ins, 0.0, None) * slope
+        out: np.ndarray = np.where(raw + slack <= ins, raw + slack, ins + SOFT_PAD_MIN_M + rise)
+        return out
 
     def _capped_pad(self, people: np.ndarray, others: np.ndarray, raw: np.ndarray, pad: float) -> np.ndarray:
         """Distance (m) to the ``people`` marks padded by ``pad``, blob by blob, the pad cut where

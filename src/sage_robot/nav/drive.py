@@ -26,7 +26,8 @@ forward check stops every arc that gets closer, and it never reverses) first tur
 open floor and creeps clear (at most ``STEP_AWAY_M``).
 
 From step 3 on (waiting for people has failed), a robot within ``SETTLE_NEAR_GOAL_M`` of
-the goal settles there instead (succeeded, with a note: people stand at the spot).
+a goal that the latest scan shows something standing on settles there instead (succeeded,
+with a note that says what stands at the spot); with nothing there it climbs on.
 
 When localization is lost: stop, Event ``lost``, global relocalization while spinning
 slowly; if health does not come back within ``nav.relocalize_timeout_s``, Event
@@ -52,6 +53,7 @@ from sage_robot.core.errors import ServiceError
 from sage_robot.core.geometry import wrap_angle
 from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.nav import NavigateFeedback, NavigateResult, NavState
+from sage_robot.nav.blockers import goal_taken
 from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_heading
 from sage_robot.nav.planner import PATH_SPACING_M, NoPath, Plan, path_blocked, plan
 from sage_robot.nav.social_drive import GROUP_EVENT_WITHIN_M, Social, group_ahead, keep_right_plan
@@ -305,7 +307,7 @@ class GoalRun:
             # person is still close ahead): go on waiting with what is left of the time
             level, self._level = 1, 2
         if level >= 2:  # people were waited for and did not leave: settle if the goal is right there
-            note = self._settle_note(pose)
+            note = await self._settle_note(pose)
             if note:
                 return note
         self.feedback(NavState.RECOVERING)
@@ -345,18 +347,37 @@ class GoalRun:
             waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
                 if self._waited_s >= 1.0 else "people are in the way and "
             return f"the way {where} is blocked: {waited}found no way around"
-        return f"the way {where} is blocked: I found no way around"
+        x, y, _ = self.pose()
+        return (f"the way {where} is blocked: I could not get past ({x:.1f}, {y:.1f}), nothing there "
+                "moved, and I found no way around")
 
-    def _settle_note(self, pose: tuple[float, float, float]) -> str:
-        """Within SETTLE_NEAR_GOAL_M of a goal people stand on: arrive there, with a note.
-        Checked as soon as waiting for people has failed, so the robot cannot shuttle back and
-        forth near the goal (moving resets the recovery ladder)."""
+    async def _settle_note(self, pose: tuple[float, float, float]) -> str:
+        """Within SETTLE_NEAR_GOAL_M of a goal that something the scan sees stands on: arrive
+        there, with a note that says what stands there. Checked as soon as waiting for people has
+        failed, so the robot cannot shuttle back and forth near the goal (moving resets the
+        recovery ladder). Nothing on the spot, no settling: the ladder goes on (issue #20: on a
+        1.45 m wide floor every stop was within reach of the goal and said "someone is standing
+        at the spot" with nobody there)."""
         gx, gy, _ = self.target.pose
         short = math.hypot(pose[0] - gx, pose[1] - gy)
         if short > SETTLE_NEAR_GOAL_M:
             return ""
+        size = await self.clock.offload(self._goal_taken, pose, self.node.scan)
+        if size is None:
+            return ""
         self.node.event("arrived", f"arrived near {self.target.spoken}", place=self.target.name)
-        return f"stopped {short:.1f} m short: someone is standing at the spot"
+        if size <= PERSON_SIZED_M:
+            return f"stopped {short:.1f} m short: someone is standing at the spot"
+        return (f"stopped {short:.1f} m short: something not on the map, about {size:.1f} m across, "
+                "stands at the spot")
+
+    def _goal_taken(self, pose: tuple[float, float, float], scan: Any) -> float | None:
+        """What the latest scan shows on the goal (:func:`blockers.goal_taken`). Runs in a
+        worker thread, its inputs taken on the event loop."""
+        cm = self.node.global_cm
+        cm.clear_obstacles()
+        self.node.refresh_global(pose, scan)
+        return goal_taken(cm, self.target.pose[:2])
 
     async def _wait_for_people(self) -> None:
         """Stop, say so, and watch the intended (obstacle-free) path until it clears."""
@@ -421,7 +442,8 @@ class GoalRun:
         r0, c0 = max(int(r.min()) - m, 0), max(int(c.min()) - m, 0)
         r1, c1 = min(int(r.max()) + m + 1, cm.geom.shape[0]), min(int(c.max()) + m + 1, cm.geom.shape[1])
         obstacles = np.zeros(cm.geom.shape, dtype=bool)
-        obstacles[r0:r1, c0:c1] = cm.obstacles[r0:r1, c0:c1]
+        # hits on the map's walls are those walls (range noise), not something in the way
+        obstacles[r0:r1, c0:c1] = cm.obstacles[r0:r1, c0:c1] & ~cm.wall_zone[r0:r1, c0:c1]
         near = np.zeros(cm.geom.shape, dtype=bool)
         ok = cm.geom.inside(r, c)
         near[r[ok], c[ok]] = True

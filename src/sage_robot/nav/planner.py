@@ -2,8 +2,9 @@
 
 The search runs in compiled code: ``pyastar2d`` (A* in C++, 8-connected) when it is
 installed, else scikit-image's ``graph.MCP_Geometric`` (Dijkstra in Cython). A cell's
-step weight is ``1 + COST_WEIGHT * cost / 252`` (NavFn's cost-aware metric); cells at or
-above ``INSCRIBED`` cannot be entered. Large maps are searched on a coarser grid (each
+step weight is ``1 + COST_WEIGHT * cost / 252`` (NavFn's cost-aware metric), more in gaps
+narrower than the robot's width + 0.2 m (``NARROW_WEIGHT``: used when there is no wider way);
+cells at or above ``INSCRIBED`` cannot be entered. Large maps are searched on a coarser grid (each
 planning cell takes the *highest* cost of the fine cells it covers, so a coarse path never
 crosses a wall the fine map has; but a cell with any passable fine cell stays passable, and a
 path through such a cell is found on the fine grid near the coarse one, so pooling never
@@ -30,6 +31,12 @@ SMOOTH_ITERATIONS = 2  # line-of-sight shortcut passes
 LINE_CHECK_STEP_CELLS = 0.25  # shortcut lines are checked every quarter cell
 BAND_M = 1.0  # a coarse path through a narrow gap is refined on the fine grid this near it (m)
 GOAL_SEARCH_RADIUS_M = 0.3  # a goal inside an inflated cell moves to the nearest free one within this
+# Gaps narrower than the robot's width + 2 x NARROW_MARGIN_M are a last resort (issue #20: in the
+# TurtleBot sandbox the shortest way ran between a pillar and the wall with 3 cm to spare each
+# side; the robot scraped the wall or stopped there for good, while a way 0.7 m wide was free):
+# each step through one weighs NARROW_WEIGHT more, about 0.5 m of detour per 5 cm cell.
+NARROW_MARGIN_M = 0.1
+NARROW_WEIGHT = 10.0
 
 
 class NoPath(Exception):
@@ -66,10 +73,21 @@ def _pool_max(cost: np.ndarray, f: int) -> np.ndarray:
     return out
 
 
-def weights_from_cost(cost: np.ndarray) -> np.ndarray:
+def narrow_cost(costmap: Costmap) -> int:
+    """The inflation cost at ``NARROW_MARGIN_M`` beyond the inscribed radius: cells costlier
+    than this lie in a gap narrower than the robot's width + 2 x NARROW_MARGIN_M."""
+    if costmap.inflation_m <= costmap.inscribed_m + NARROW_MARGIN_M:
+        return MAX_NON_OBSTACLE
+    return int(MAX_NON_OBSTACLE * math.exp(-costmap.cost_scaling * NARROW_MARGIN_M))
+
+
+def weights_from_cost(cost: np.ndarray, narrow: int = MAX_NON_OBSTACLE) -> np.ndarray:
+    """Step weights: ``1 + COST_WEIGHT * cost / 252``, plus ``NARROW_WEIGHT`` on cells costlier
+    than ``narrow`` (a gap the robot barely fits: a last resort), inscribed cells impassable."""
     w: np.ndarray = (
         1.0 + COST_WEIGHT * np.minimum(cost, MAX_NON_OBSTACLE).astype(np.float32) / MAX_NON_OBSTACLE
     )
+    w[cost > narrow] += NARROW_WEIGHT
     w[cost >= INSCRIBED] = np.inf
     return w.astype(np.float32)
 
@@ -181,7 +199,7 @@ def _fine_in_band(costmap: Costmap, cells: np.ndarray, f: int, start: tuple[floa
             ok = (rr >= 0) & (rr < band.shape[0]) & (cc >= 0) & (cc < band.shape[1])
             band[rr[ok], cc[ok]] = True
     band = ndimage.binary_dilation(band, iterations=k)
-    weights = weights_from_cost(costmap.cost[r0:r1, c0:c1])
+    weights = weights_from_cost(costmap.cost[r0:r1, c0:c1], narrow_cost(costmap))
     weights[~band] = np.inf
     radius = max(1, round(GOAL_SEARCH_RADIUS_M / g.resolution))
 
@@ -216,7 +234,7 @@ def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float]
     if factor > 1 and open_pool:
         rescued = (_pool_min(costmap.cost, factor) < INSCRIBED) & (cost >= INSCRIBED)
         cost = np.where(rescued, np.uint8(MAX_NON_OBSTACLE), cost)
-    weights = weights_from_cost(cost)
+    weights = weights_from_cost(cost, narrow_cost(costmap))
     res = g.resolution * factor
     radius = max(1, round(GOAL_SEARCH_RADIUS_M / res))
 
