@@ -119,6 +119,13 @@ def costs_from_distance(dist: np.ndarray, lethal: np.ndarray, inscribed_m: float
     return cost
 
 
+def bounding_box(mask: np.ndarray) -> tuple[int, int, int, int]:
+    """First and last row, first and last column of a non-empty 2-D mask. From its rows' and
+    columns' ``any`` (0.1 ms on a 2000 x 1600 map), not ``np.nonzero`` (25 ms there)."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    return int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
+
+
 def drop_speckles(unknown: np.ndarray, resolution: float) -> np.ndarray:
     """``unknown`` without its speckles: blobs of unknown cells smaller than ``SPECKLE_MAX_M2``
     that do not touch the grid's edge are map noise in free space (a SLAM map's unseen pixels
@@ -328,10 +335,10 @@ class Costmap:
         self.dist = self._base_dist.copy()
         if not self.obstacles.any():
             return
-        rr, cc = np.nonzero(self.obstacles)
+        rmin, rmax, cmin, cmax = bounding_box(self.obstacles)
         margin = math.ceil((self.inflation_m + OBSTACLE_PAD_M) / self.geom.resolution) + 1  # cells
-        r0, r1 = max(rr.min() - margin, 0), min(rr.max() + margin + 1, self.geom.shape[0])
-        c0, c1 = max(cc.min() - margin, 0), min(cc.max() + margin + 1, self.geom.shape[1])
+        r0, r1 = max(rmin - margin, 0), min(rmax + margin + 1, self.geom.shape[0])
+        c0, c1 = max(cmin - margin, 0), min(cmax + margin + 1, self.geom.shape[1])
         lethal, wall = self.obstacles[r0:r1, c0:c1], self.wall_zone[r0:r1, c0:c1]
         people = person_sized(lethal & ~wall, self.geom.resolution,
                               self.static[r0:r1, c0:c1] | (lethal & wall))
