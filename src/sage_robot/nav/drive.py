@@ -66,8 +66,9 @@ LOCALIZED_WAIT_S = 10.0  # wait this long for a first pose before giving up
 PROGRESS_RESET_M = 1.0  # driving this far after a recovery resets the recovery ladder
 CLEAR_SETTLE_S = 0.5  # after clearing the costmaps, let fresh scans come in (s)
 PLAN_DROP_WAIT_S = 5.0  # bound on waiting for a plan in flight when a drive ends (s)
-PLAN_LATENCY_S = 0.1  # time a plan may take (a Jetson's planner on a building map): in the
-#   simulator the robot drives on beside it and the plan arrives exactly this much later (s)
+PLAN_LATENCY_S = 0.25  # time a plan may take (a Jetson's planner on a building map, as Nav2's
+#   planner server replans while the controller follows the previous path): in the simulator
+#   the robot drives on beside it and the plan arrives exactly this much later (s)
 EXCUSE_ME_AGAIN_S = 30.0  # "excuse me" at most this often on one goal: once, then wait (s)
 WATCH_PERIOD_S = 0.5  # how often the intended path is checked while waiting for people (s)
 WATCH_AHEAD_M = 8.0  # how much of the intended path must be free to go on (m)

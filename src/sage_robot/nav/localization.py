@@ -40,7 +40,7 @@ FORCED_UPDATES_AFTER_RESET = 8  # filter updates without motion after a global r
 FORCED_UPDATE_PERIOD_S = 0.3  # how often those forced updates may run (s)
 MIN_INITIAL_SIGMA_XY_M = 0.05
 MIN_INITIAL_SIGMA_YAW_RAD = 0.05
-UPDATE_LATENCY_S = 0.05  # time a filter update may take (half a 10 Hz scan period): in the
+UPDATE_LATENCY_S = 0.1  # time a filter update may take (a 10 Hz scan period): in the
 #   simulator time runs on beside it and the update lands exactly this much later (s)
 REFINE_SPREAD_M = 0.3  # refine the pose by scan matching only once the cloud is this tight (m)
 
