@@ -205,20 +205,30 @@ class Costmap:
 
     def __init__(self, geom: GridGeometry, static: np.ndarray, unknown: np.ndarray,
                  inscribed_m: float, inflation_m: float, cost_scaling: float,
-                 keepout: np.ndarray | None = None, speed: np.ndarray | None = None) -> None:
+                 keepout: np.ndarray | None = None, speed: np.ndarray | None = None,
+                 derived: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """``derived``: the wall zone, the inflated cost of the walls and keep-out (before the
+        unknown cells are marked) and the distance to them, when already known (a window cut
+        from a larger costmap); computed here otherwise."""
         self.geom = geom
         self.inscribed_m, self.inflation_m, self.cost_scaling = inscribed_m, inflation_m, cost_scaling
         self.static = static.astype(bool)
-        self.unknown = drop_speckles(unknown.astype(bool), geom.resolution)
+        unknown = unknown.astype(bool)
+        self.unknown = drop_speckles(unknown, geom.resolution) if unknown.any() else unknown
         self.keepout = np.zeros(geom.shape, bool) if keepout is None else keepout.astype(bool)
         self.speed = np.full(geom.shape, NO_SPEED_LIMIT, np.float32) if speed is None else speed
         self.obstacles = np.zeros(geom.shape, dtype=bool)
-        snap = max(1, round(WALL_SNAP_M / geom.resolution))
-        disk = np.hypot(*np.mgrid[-snap:snap + 1, -snap:snap + 1]) <= snap
-        self.wall_zone = ndimage.binary_dilation(self.static, structure=disk)  # hits here are walls
-        base = self.static | self.keepout
-        self._base_cost, self._base_dist = inflate(base, geom.resolution, inscribed_m, inflation_m,
-                                                   cost_scaling)
+        if derived is None:
+            snap = max(1, round(WALL_SNAP_M / geom.resolution))
+            disk = np.hypot(*np.mgrid[-snap:snap + 1, -snap:snap + 1]) <= snap
+            wall_zone = ndimage.binary_dilation(self.static, structure=disk)
+            wall_cost, wall_dist = inflate(self.static | self.keepout, geom.resolution, inscribed_m,
+                                           inflation_m, cost_scaling)
+        else:
+            wall_zone, wall_cost, wall_dist = derived
+        self.wall_zone = wall_zone  # scan hits here are walls
+        self._wall_cost, self._base_dist = wall_cost, wall_dist
+        self._base_cost = wall_cost.copy()
         self._base_cost[self.unknown & (self._base_cost < LETHAL)] = NO_INFORMATION
         self.cost = self._base_cost.copy()
         self.dist = self._base_dist.copy()
@@ -260,6 +270,16 @@ class Costmap:
                 out[rs.start - r0:rs.stop - r0, cs.start - c0:cs.stop - c0] = a[rs, cs]
             return out
 
+        if r0 >= 0 and c0 >= 0 and r0 + n <= g.shape[0] and c0 + n <= g.shape[1]:
+            # inside the map (nearly always): the walls' zone and inflation are cut from this
+            # costmap's, not computed again for every scan (they also see walls just outside the
+            # window, as the window's own would not)
+            rs, cs = slice(r0, r0 + n), slice(c0, c0 + n)
+            derived = (self.wall_zone[rs, cs].copy(), self._wall_cost[rs, cs].copy(),
+                       self._base_dist[rs, cs].copy())
+            return Costmap(geom, self.static[rs, cs], np.zeros((n, n), dtype=bool), self.inscribed_m,
+                           self.inflation_m, self.cost_scaling, self.keepout[rs, cs],
+                           self.speed[rs, cs].copy(), derived)
         outside = np.ones((n, n), dtype=bool)
         rs, cs = slice(max(r0, 0), min(r0 + n, g.shape[0])), slice(max(c0, 0), min(c0 + n, g.shape[1]))
         if rs.start < rs.stop and cs.start < cs.stop:
