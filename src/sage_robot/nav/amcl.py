@@ -53,7 +53,16 @@ INIT_SIGMA_XY_M, INIT_SIGMA_YAW_RAD = 0.25, 0.2
 CLUSTER_CELL_M = 0.5  # particles are grouped on this grid to find the heaviest cluster
 CLUSTER_RADIUS_M = 1.0  # the estimate averages particles this close to that cluster
 MAX_INJECT_FRACTION = 0.2  # at most this share of particles is redrawn at random per update
-INJECT_RATIO = 0.8  # inject only once the short-term fit falls below this share of the long-term one
+INJECT_RATIO = 0.5  # inject only once the short-term fit falls below this share of the long-term one
+# A confident estimate (its cluster holds CONFIDENT_SHARE of the weight) stays with the particles
+# near where it was, carried by the odometry, until another place has been heavier for
+# SWITCH_UPDATES filter updates in a row (or the home keeps almost nothing): issue #20, in an open
+# hall of willow-2010 the fit of the true pose fell (long, noisy returns), injected particles in
+# a small room elsewhere fitted better for a moment, and the estimate jumped 20 m while it was
+# exact; the robot then drove on a wrong pose and asked for help.
+CONFIDENT_SHARE = 0.9
+SWITCH_UPDATES = 8
+HOME_MIN_SHARE = 0.02
 
 
 @dataclass(frozen=True)
@@ -129,6 +138,9 @@ class ParticleFilter:
         self._odom_ref: tuple[float, float, float] | None = None  # odometry at the last filter update
         self.updates = 0
         self.injected = 0
+        self._centre: np.ndarray | None = None  # the cluster the estimate reports (None: the heaviest)
+        self._home: tuple[float, float, float] | None = None  # a confident estimate at the last update
+        self._rival = 0  # updates in a row another place was heavier than home
 
     # ---------------------------------------------------------------- initialization
     def set_pose(self, x: float, y: float, theta: float, sigma_xy: float = INIT_SIGMA_XY_M,
@@ -141,6 +153,10 @@ class ParticleFilter:
         self.weights = np.full(n, 1.0 / n)
         self.w_slow = self.w_fast = 0.0
         self._cap = self.n_max
+        self._forget_home()
+
+    def _forget_home(self) -> None:
+        self._centre, self._home, self._rival = None, None, 0
 
     @property
     def region(self) -> np.ndarray:
@@ -169,6 +185,7 @@ class ParticleFilter:
         self.weights = equal_share_weights(self.particles)
         self.w_slow = self.w_fast = 0.0
         self._odom_ref = None
+        self._forget_home()
 
     # ---------------------------------------------------------------- filtering
     def _subsample(self, angles: np.ndarray, ranges: np.ndarray, range_max: float,
@@ -196,6 +213,7 @@ class ParticleFilter:
                 return False
         elif not (force or self.moved_enough(odom)):
             return False
+        home = None if self._home is None else compose(self._home, relative(self._odom_ref, odom))
         self.particles = sample_odometry(self.particles, self._odom_ref, odom, self.rng)
         self._odom_ref = odom
         a, r, rmax = self._subsample(angles, ranges, range_max, self.beams)
@@ -204,8 +222,35 @@ class ParticleFilter:
         loglik = beam_log_likelihood(self.field, self.particles, self.sensor, a, r, rmax)
         self._weigh(loglik, len(r))
         self._resample(loglik / len(r))
+        self._choose(home)
         self.updates += 1
         return True
+
+    def _choose(self, home: tuple[float, float, float] | None) -> None:
+        """Which cluster the estimate reports from now on: the heaviest, except that a confident
+        estimate stays home (see ``SWITCH_UPDATES``)."""
+        p, w = self.particles, self.weights
+        self._centre = None
+        centre = self._heaviest_centre()
+        anchored = False  # the estimate is (still) home
+        if home is not None:
+            at_home = np.hypot(p[:, 0] - home[0], p[:, 1] - home[1]) <= CLUSTER_RADIUS_M
+            home_mass = float(w[at_home].sum())
+            if math.hypot(centre[0] - home[0], centre[1] - home[1]) <= CLUSTER_RADIUS_M:
+                self._rival, anchored = 0, True
+            elif home_mass >= HOME_MIN_SHARE * float(w.sum()):
+                rival = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) <= CLUSTER_RADIUS_M
+                self._rival = self._rival + 1 if float(w[rival].sum()) > home_mass else 0
+                if self._rival < SWITCH_UPDATES:
+                    centre = np.average(p[at_home, :2], axis=0, weights=w[at_home] + 1e-300)
+                    anchored = True
+        if not anchored:
+            self._rival = 0
+        self._centre = centre
+        near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) <= CLUSTER_RADIUS_M
+        confident = float(w[near].sum()) >= CONFIDENT_SHARE * float(w.sum())
+        e = self.estimate()
+        self._home = (e.x, e.y, e.theta) if (anchored or confident) else None
 
     def _weigh(self, loglik: np.ndarray, n_beams: int) -> None:
         logw = np.log(np.maximum(self.weights, 1e-300)) + BEAM_TEMPER * loglik
@@ -253,14 +298,22 @@ class ParticleFilter:
         """Mean and covariance of the heaviest cluster (as AMCL reports its best cluster, so
         injected random particles and far-away hypotheses do not drag the pose)."""
         p, w = self.particles, self.weights
+        centre = self._heaviest_centre() if self._centre is None else self._centre
+        near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) <= CLUSTER_RADIUS_M
+        if not near.any():
+            centre = self._heaviest_centre()
+            near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) <= CLUSTER_RADIUS_M
+        return _weighted_pose(p[near], w[near])
+
+    def _heaviest_centre(self) -> np.ndarray:
+        p, w = self.particles, self.weights
         cells = np.floor(p[:, :2] / CLUSTER_CELL_M).astype(np.int64)
         _, inverse = np.unique(_key(cells), return_inverse=True)
-        mass = np.bincount(inverse.ravel(), weights=w)
         inverse = inverse.ravel()
+        mass = np.bincount(inverse, weights=w)
         best = inverse == int(np.argmax(mass))
-        centre = np.average(p[best, :2], axis=0, weights=w[best] + 1e-300)
-        near = np.hypot(p[:, 0] - centre[0], p[:, 1] - centre[1]) <= CLUSTER_RADIUS_M
-        return _weighted_pose(p[near], w[near])
+        centre: np.ndarray = np.average(p[best, :2], axis=0, weights=w[best] + 1e-300)
+        return centre
 
     def spread_m(self) -> float:
         """How far from converged the cloud is (m): the larger of the weighted root-mean-square
