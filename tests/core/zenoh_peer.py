@@ -3,7 +3,8 @@
 ``python tests/core/zenoh_peer.py ROBOT_ID PORT [CONNECT]``: a bus on the wall clock with a
 Zenoh transport listening on 127.0.0.1:PORT. It publishes a 360-beam ``/scan`` at
 :data:`SCAN_HZ` and the latched ``/sage/health`` once, answers every ``/cmd_vel`` it hears
-with ``/peer/heard`` (the speed as text), serves :data:`UPPER`, prints ``ready`` and runs
+with ``/peer/heard`` (the speed as text), serves :data:`UPPER` and the action :data:`COUNT`,
+prints ``ready`` and runs
 until stdin closes (the test ends it) or :data:`MAX_RUN_S` passes. The operator password is
 ``$SAGE_OPERATOR_PASSWORD``.
 """
@@ -25,6 +26,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from sage_robot.core import topics
+from sage_robot.core.actions import ActionAborted, GoalContext
 from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.clock import WallClock
 from sage_robot.core.config.bus import BusSettings, ZenohSettings
@@ -39,6 +41,9 @@ STOP_S = 10.0
 HEARD = Topic("/peer/heard", Text)
 UPPER = "/peer/upper"  # service: Text -> Text in capitals; "boom" fails, "slow" takes 5 s
 SLOW_S = 5.0
+COUNT = "peer_count"  # action: Text("N") -> feedback Text("1") .. Text("N"), result Text("counted N");
+# "forever" counts until cancelled, "fail" aborts with "asked to fail"
+COUNT_STEP_S = 0.05
 PASSWORD = "peer-test-password"
 
 
@@ -117,11 +122,23 @@ async def _upper(request: Text) -> Text:
     return Text(request.data.upper())
 
 
+async def _count(goal: Text, ctx: GoalContext) -> Text:
+    if goal.data == "fail":
+        raise ActionAborted("asked to fail")
+    n = 0
+    while goal.data == "forever" or n < int(goal.data):
+        await asyncio.sleep(COUNT_STEP_S)
+        n += 1
+        ctx.feedback(Text(str(n)))
+    return Text(f"counted {n}")
+
+
 async def _serve(bus: Bus) -> None:
     bus.declare(topics.HEALTH, latched=True)
     bus.subscribe(topics.CMD_VEL, Twist, lambda m: bus.publish(HEARD, Text(f"{m.linear_x:g}")))
     bus.publish(topics.HEALTH, HealthReport(0.0, (NodeHealth("peer", "running", critical=True),)))
     bus.serve(UPPER, _upper)
+    bus.actions.serve(COUNT, _count)
     ranges = np.linspace(0.5, 5.0, SCAN_BEAMS, dtype=np.float32)
     ranges[0] = np.inf
     stdin_closed = threading.Event()

@@ -24,18 +24,26 @@ Nothing here can wedge (safety depends on it: the e-stop and the pages cancel go
   :data:`CANCEL_WAIT_S` (raising :class:`GoalTimeout`; the cancel stays requested), and
   :meth:`GoalHandle.result` takes a timeout. :meth:`GoalHandle.request_cancel` does not
   wait at all (for the safety paths).
+
+Across processes (a networked transport's :class:`RemoteActions`, e.g. Zenoh's
+:mod:`sage_robot.core.transport.actions`): a server is also offered to other processes, and
+a goal for an action no local node serves goes to the process that serves it. The client
+gets the same :class:`GoalHandle` API (feedback, result, cancel); a server process that dies
+ends the goal as ``ABORTED`` with a reason, within a bounded time. A local server always
+wins, so a single process behaves exactly as before.
 """
 
 from __future__ import annotations
 
 import asyncio
+import functools
 import itertools
 import logging
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from enum import Enum
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from sage_robot.core.errors import SageError, ServiceUnavailable
 
@@ -175,6 +183,28 @@ class GoalHandle:
 
 
 Handler = Callable[[Any, GoalContext], Awaitable[Any]]
+Accept = Callable[[Any, "type[GoalHandle]"], "GoalHandle | None"]  # (goal, handle class) -> started goal
+
+
+class RemoteActions(Protocol):
+    """Actions beyond this process, as a networked transport offers them
+    (:meth:`~sage_robot.core.bus.Transport.remote_actions`)."""
+
+    def offer(self, name: str, accept: Accept) -> None:
+        """Other processes may send goals to the local server ``name``; ``accept`` starts one
+        on it (on the bus's loop) and returns its handle, or None when it is no longer served."""
+
+    def withdraw(self, name: str) -> None:
+        """The local server ``name`` is gone."""
+
+    def has(self, name: str) -> bool:
+        """Whether another process serves ``name`` now."""
+
+    def send_goal(self, name: str, goal_id: int, goal: Any) -> GoalHandle:
+        """Start ``goal`` on another process's server (never waits); the handle follows it."""
+
+    def active(self, name: str) -> GoalHandle | None:
+        """The latest goal this process sent to another's ``name`` that has not ended."""
 
 
 class ActionServer:
@@ -277,6 +307,7 @@ class ActionRegistry:
         self._bus = bus
         self._servers: dict[str, ActionServer] = {}
         self._ids = itertools.count(1)
+        self._remote: RemoteActions | None = bus.transport.remote_actions()
 
     def serve(
         self, name: str, handler: Handler, policy: Policy = "preempt", max_queue: int = DEFAULT_MAX_QUEUE
@@ -284,27 +315,47 @@ class ActionRegistry:
         if name in self._servers:
             raise ValueError(f"action {name} is already served")
         server = self._servers[name] = ActionServer(name, handler, policy, max_queue)
+        if self._remote is not None:
+            self._remote.offer(name, functools.partial(self._accept, name))
         return server
+
+    def _accept(self, name: str, goal: Any, cls: type[GoalHandle]) -> GoalHandle | None:
+        """A goal from another process: started on the local server like a local one."""
+        server = self._servers.get(name)
+        if server is None:
+            return None
+        handle = cls(next(self._ids), goal)
+        server.start(handle)
+        return handle
 
     def unserve(self, name: str) -> ActionServer | None:
         """Stop serving ``name`` (its goals end, cancelled); the server that was removed."""
         server = self._servers.pop(name, None)
         if server is not None:
             server.stop_all()
+            if self._remote is not None:
+                self._remote.withdraw(name)
         return server
 
     def has(self, name: str) -> bool:
-        return name in self._servers
+        """Whether a node serves ``name``, in this process or (networked) in another."""
+        return name in self._servers or (self._remote is not None and self._remote.has(name))
 
     def active(self, name: str) -> GoalHandle | None:
+        """The local server's running goal; without one, the latest unfinished goal this
+        process sent to another process's server."""
         server = self._servers.get(name)
-        return server.active if server else None
+        if server is not None:
+            return server.active
+        return self._remote.active(name) if self._remote is not None else None
 
     async def send_goal(self, name: str, goal: Any) -> GoalHandle:
         """Start a goal (never waits for another goal); a running goal on a ``preempt``
         server is asked to stop first and the new handler runs once it has."""
         server = self._servers.get(name)
         if server is None:
+            if self._remote is not None and self._remote.has(name):
+                return self._remote.send_goal(name, next(self._ids), goal)
             raise ServiceUnavailable(f"no node serves the action {name}")
         handle = GoalHandle(next(self._ids), goal)
         server.start(handle)

@@ -25,10 +25,13 @@ from abc import ABC, abstractmethod
 from collections import deque
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
-from typing import Any, Generic, Protocol, TypeVar, overload
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar, overload
 
 from sage_robot.core.clock import Clock, WallClock
 from sage_robot.core.errors import ServiceError, ServiceTimeout, ServiceUnavailable
+
+if TYPE_CHECKING:
+    from sage_robot.core.actions import RemoteActions
 
 M = TypeVar("M")
 Req = TypeVar("Req")
@@ -100,6 +103,10 @@ class Transport(ABC):
     async def call(self, name: str, request: Any, timeout: float | None) -> Any:
         """Call a service of another process; the default knows none."""
         raise ServiceUnavailable(f"no node offers the service {name}")
+
+    def remote_actions(self) -> RemoteActions | None:
+        """Actions beyond the process (:mod:`sage_robot.core.actions`); the default has none."""
+        return None
 
 
 class LocalTransport(Transport):

@@ -28,6 +28,7 @@ import zenoh
 from sage_robot.core.bus import Transport
 from sage_robot.core.config.bus import BusSettings
 from sage_robot.core.transport import wire
+from sage_robot.core.transport.actions import ZenohActions
 from sage_robot.core.transport.keys import (
     TOPIC_NAME,
     kind_key,
@@ -50,6 +51,7 @@ class ZenohTransport(Transport):
         self.session = open_session(session_config(z, None, None), "bus")
         self.zid = str(self.session.zid())
         self.services = ZenohServices(self.session, self.robot)
+        self.actions = ZenohActions(self.session, self.robot, self.zid)
         self._operator_password = operator_password
         self._deliver: Callable[[str, Any], None] | None = None
         self._publishers: dict[str, Any] = {}
@@ -107,6 +109,9 @@ class ZenohTransport(Transport):
     async def call(self, name: str, request: Any, timeout: float | None) -> Any:
         return await self.services.call(name, request, timeout)
 
+    def remote_actions(self) -> ZenohActions:
+        return self.actions
+
     def matched(self, topic: str) -> bool:
         """Whether another process subscribes to ``topic`` (known once it was published here)."""
         return bool(self._matched.get(topic))
@@ -117,6 +122,7 @@ class ZenohTransport(Transport):
                 return
             self.closed = True
         self.services.close()
+        self.actions.close()
         for decl in [*self._declared, *self._publishers.values()]:
             with contextlib.suppress(zenoh.ZError):  # the session closed at exit already
                 decl.undeclare()
