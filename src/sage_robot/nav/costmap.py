@@ -232,6 +232,7 @@ class Costmap:
         self._base_cost[self.unknown & (self._base_cost < LETHAL)] = NO_INFORMATION
         self.cost = self._base_cost.copy()
         self.dist = self._base_dist.copy()
+        self._dirty: tuple[slice, slice] | None = None  # where cost and dist differ from the base
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -350,15 +351,21 @@ class Costmap:
 
     def refresh(self) -> None:
         """Recombine the layers. Only the bounding box of the obstacles (plus the inflation
-        radius) is re-inflated, so a large map with a few people costs little."""
-        self.cost = self._base_cost.copy()
-        self.dist = self._base_dist.copy()
+        radius) is re-inflated, and only the box the last refresh changed is reset to the walls'
+        layers, in place: a large map with a few people costs little (two full copies of the
+        campus map's layers took 2-3 ms of every refresh)."""
+        if self._dirty is not None:
+            rs, cs = self._dirty
+            self.cost[rs, cs] = self._base_cost[rs, cs]
+            self.dist[rs, cs] = self._base_dist[rs, cs]
+            self._dirty = None
         if not self.obstacles.any():
             return
         rmin, rmax, cmin, cmax = bounding_box(self.obstacles)
         margin = math.ceil((self.inflation_m + OBSTACLE_PAD_M) / self.geom.resolution) + 1  # cells
         r0, r1 = max(rmin - margin, 0), min(rmax + margin + 1, self.geom.shape[0])
         c0, c1 = max(cmin - margin, 0), min(cmax + margin + 1, self.geom.shape[1])
+        self._dirty = (slice(r0, r1), slice(c0, c1))
         lethal, wall = self.obstacles[r0:r1, c0:c1], self.wall_zone[r0:r1, c0:c1]
         people = person_sized(lethal & ~wall, self.geom.resolution,
                               self.static[r0:r1, c0:c1] | (lethal & wall))
