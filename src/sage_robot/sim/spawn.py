@@ -27,6 +27,7 @@ GROUP_FROM_PLACE_M = (1.5, 2.5)  # a group stands this far beyond a place...
 GROUP_SPREAD_RAD = math.pi / 3  # ...within this angle of the direction the place faces
 APPROACHER_FROM_ROBOT_M = (3.0, 10.0)
 SPAWN_TRIES = 200
+SMALL_FLOOR_MIN_DIST_M = 2.0  # where no spot is SPAWN_MIN_DIST_M from the robot, people start this far
 BEHAVIOURS = ("walker", "stander", "group", "approacher")
 PERSON_KEYS = {"kind", "at", "to", "heading", "speed", "start_s", "stay_s"}
 
@@ -54,19 +55,23 @@ def spawn_crowd(
     def clear(x: float, y: float, need: float) -> bool:
         return float(clearance(x, y)[0]) >= need
 
-    def far(x: float, y: float, lo: float = SPAWN_MIN_DIST_M, hi: float = math.inf) -> bool:
-        d = math.hypot(x - robot_xy[0], y - robot_xy[1])
-        return lo <= d <= hi
+    near_m = [SPAWN_MIN_DIST_M]  # how far from the robot people start (less on a small floor)
 
-    def spot(ok: Callable[[float, float], bool], edge: bool = False) -> tuple[float, float]:
-        for _ in range(SPAWN_TRIES):
-            if lanes is not None:
-                x, y, _ = lanes.random_point(rng, PERSON_RADIUS_M + 0.1, edge)
-            else:
-                x, y = sample_free(rng)
-            if clear(x, y, PERSON_RADIUS_M + 0.1) and ok(x, y):
-                return (x, y)
-        raise ConfigError("could not find room for the simulated people; lower sim.pedestrians")
+    def far(x: float, y: float, lo: float | None = None, hi: float = math.inf) -> bool:
+        d = math.hypot(x - robot_xy[0], y - robot_xy[1])
+        return (near_m[0] if lo is None else lo) <= d <= hi
+
+    def spot(ok: Callable[[float, float], bool], edge: bool = False,
+             relax: bool = True) -> tuple[float, float]:
+        found = _draw(rng, lanes, sample_free, clear, ok, edge)
+        if found is None and relax and near_m[0] > SMALL_FLOOR_MIN_DIST_M:
+            # a floor with no room SPAWN_MIN_DIST_M from the robot (the TurtleBot sandbox is 5.6 m
+            # across): people start nearer, from here on (a large map never gets here: same crowd)
+            near_m[0] = SMALL_FLOOR_MIN_DIST_M
+            found = _draw(rng, lanes, sample_free, clear, ok, edge)
+        if found is None:
+            raise ConfigError("could not find room for the simulated people; lower sim.pedestrians")
+        return found
 
     fx = robot_xy[0] + APPROACH_STOP_M * math.cos(robot_yaw)
     fy = robot_xy[1] + APPROACH_STOP_M * math.sin(robot_yaw)
@@ -83,7 +88,8 @@ def spawn_crowd(
         if kind == "approacher":
             # Somewhere in sight of the spot in front of the robot where they will stand.
             try:
-                x, y = spot(lambda x, y: far(x, y, *APPROACHER_FROM_ROBOT_M) and line_of_sight(x, y, fx, fy))
+                x, y = spot(lambda x, y: far(x, y, *APPROACHER_FROM_ROBOT_M) and line_of_sight(x, y, fx, fy),
+                            relax=False)
             except ConfigError:
                 x, y = spot(far)
             people.append(
@@ -105,6 +111,20 @@ def spawn_crowd(
             PersonState(pid, x, y, heading, behaviour, speed_mps=float(rng.uniform(*WALK_SPEED_MPS)))
         )
     return people
+
+
+def _draw(rng: np.random.Generator, lanes: Lanes | None, sample_free: SampleFree,
+          clear: Callable[[float, float, float], bool], ok: Callable[[float, float], bool],
+          edge: bool) -> tuple[float, float] | None:
+    """A free spot a person fits on that ``ok`` accepts, in SPAWN_TRIES draws; None if none."""
+    for _ in range(SPAWN_TRIES):
+        if lanes is not None:
+            x, y, _ = lanes.random_point(rng, PERSON_RADIUS_M + 0.1, edge)
+        else:
+            x, y = sample_free(rng)
+        if clear(x, y, PERSON_RADIUS_M + 0.1) and ok(x, y):
+            return (x, y)
+    return None
 
 
 def _group(
