@@ -220,12 +220,12 @@ class Bus:
         self.clock = clock or WallClock()
         self.transport = transport or LocalTransport()
         self.remote_rejected = 0  # remote messages not delivered (wrong type, no loop yet)
-        self.transport.attach(self._deliver_remote)
         self._topics: dict[str, TopicInfo] = {}
         self._services: dict[str, ServiceInfo] = {}
         self._taps: list[Callable[[str, Any], None]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
+        self.transport.attach(self._deliver_remote)  # last: remote messages may come at once
         from sage_robot.core.actions import ActionRegistry  # the module builds on this one
 
         self.actions = ActionRegistry(self)
