@@ -100,3 +100,22 @@ async def test_a_diagonal_channel_the_robot_fits_is_passed(tmp_path, width_m) ->
     assert math.hypot(sim.pose[0] - goal[0], sim.pose[1] - goal[1]) <= GOAL_TOLERANCE_TRUTH_M
     assert sim.collisions == 0
     assert not sim.reversed_commands()
+
+
+def test_goal_taken_counts_what_stands_on_the_goal_not_the_walls() -> None:
+    from sage_robot.nav.blockers import goal_taken
+    from sage_robot.nav.costmap import Costmap
+
+    cm = Costmap.from_grid(room(5.0, 2.5, RES), 0.25, 0.55, 3.0)
+    goal = (4.5, 1.25)  # 0.45 m from the east wall's face
+    angles = np.linspace(-0.3, 0.3, 61)
+    # the wall itself, seen from a pose 7 cm off (localization): hits in front of the mapped wall
+    cm.update_scan((0.93, 1.25, 0.0), angles, (4.95 - 1.0) / np.cos(angles), 12.0)
+    assert cm.obstacles.any()
+    assert goal_taken(cm, goal) is None  # hits on a mapped wall are that wall, not someone
+    legs = np.array([-0.03, 0.03])  # a person's legs 0.2 m before the goal
+    cm.update_scan((1.0, 1.25, 0.0), legs, np.full(2, 3.3), 12.0)
+    size = goal_taken(cm, goal)
+    assert size is not None
+    assert size <= 0.6
+    assert goal_taken(cm, (2.0, 1.25)) is None  # nothing on a goal elsewhere
