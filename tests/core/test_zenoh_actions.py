@@ -25,6 +25,7 @@ from sage_robot.core.config.bus import BusSettings, ZenohSettings
 from sage_robot.core.errors import ServiceUnavailable
 from sage_robot.core.msgs import Text
 from sage_robot.core.transport import actions as zactions
+from sage_robot.core.transport import wire
 from sage_robot.core.transport.zenoh_bus import ZenohTransport
 from tests.core.zenoh_peer import COUNT, free_port, running_peer, unique_robot
 from tests.support.waits import until
@@ -124,5 +125,5 @@ def test_envelopes_round_trip_and_refuse_garbage() -> None:
     header = {"status": "executing", "n": 3}
     assert zactions.unpack(zactions.pack(header, frames)) == (header, frames)
     for bad in (b"", b"\x05\x00\x00\x00{}", zactions.pack(header, [b"abc"])[:-1], b"\x02\x00\x00\x00[]"):
-        with pytest.raises(zactions.wire.WireError, match="bad envelope"):
+        with pytest.raises(wire.WireError, match="bad envelope"):
             zactions.unpack(bad)

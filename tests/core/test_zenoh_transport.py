@@ -230,6 +230,8 @@ async def test_a_service_of_another_process_is_called_through_the_bus(peer: tupl
     try:
         reply = await until_value(lambda: bus.call(UPPER, Text("hello"), timeout=2.0))
         assert reply == Text("HELLO")
+        await until(lambda: bus.has_service(UPPER), "the peer's service is known here", poll=0.02)
+        assert not bus.has_service("/peer/nothing")
         with pytest.raises(ServiceError, match="boom was asked for"):
             await bus.call(UPPER, Text("boom"), timeout=2.0)
         with pytest.raises(ServiceTimeout, match=r"within 0\.3 s"):

@@ -100,6 +100,10 @@ class Transport(ABC):
     def withdraw(self, name: str) -> None:  # noqa: B027
         """The local service is gone."""
 
+    def has_service(self, name: str) -> bool:
+        """Whether another process offers the service ``name``; the default knows none."""
+        return False
+
     async def call(self, name: str, request: Any, timeout: float | None) -> Any:
         """Call a service of another process; the default knows none."""
         raise ServiceUnavailable(f"no node offers the service {name}")
@@ -381,7 +385,8 @@ class Bus:
             self.transport.withdraw(name)
 
     def has_service(self, name: str) -> bool:
-        return name in self._services
+        """Whether a node offers ``name``, in this process or (networked) in another."""
+        return name in self._services or self.transport.has_service(name)
 
     async def call(self, name: str, request: Any, timeout: float | None = DEFAULT_SERVICE_TIMEOUT_S) -> Any:
         """Call a service; errors and time-outs raise :class:`ServiceError` subclasses."""

@@ -3,9 +3,9 @@
 A process that serves an action offers it with
 
 - a liveliness token ``sage/<robot>/alive/action/<zid>/<name>`` (every process follows these
-  tokens, so ``bus.actions.has(name)`` knows at once whether another process serves it, and
-  the token's end says that the server's process is gone: Zenoh drops the tokens of a session
-  whose link closed, e.g. after ``kill -9``);
+  tokens (:class:`~.services.Directory`), so ``bus.actions.has(name)`` knows at once whether
+  another process serves it, and the token's end says that the server's process is gone:
+  Zenoh drops the tokens of a session whose link closed, e.g. after ``kill -9``);
 - a queryable ``sage/<robot>/action/<zid>/<name>``, whose queries carry their operation as a
   JSON attachment:
 
@@ -33,7 +33,6 @@ import contextlib
 import json
 import logging
 import struct
-import threading
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future
@@ -45,7 +44,7 @@ import zenoh
 from sage_robot.core.actions import FEEDBACK_QUEUE, Accept, ActionResult, GoalHandle, GoalStatus
 from sage_robot.core.transport import wire
 from sage_robot.core.transport.keys import PREFIX
-from sage_robot.core.transport.services import SERVICE_NAME
+from sage_robot.core.transport.services import SERVICE_NAME, Directory
 
 GOAL_ACCEPT_S = 5.0  # longest the client waits for the server to take a goal (wall s)
 POLL_HOLD_S = 1.0  # the server holds a poll this long while the goal has nothing new (wall s)
@@ -63,10 +62,6 @@ _log = logging.getLogger("sage.bus.zenoh")
 
 def action_key(robot: str, zid: str, name: str) -> str:
     return f"{PREFIX}/{robot}/action/{zid}/{name.lstrip('/')}"
-
-
-def token_key(robot: str, zid: str, name: str) -> str:
-    return f"{PREFIX}/{robot}/alive/action/{zid}/{name.lstrip('/')}"
 
 
 # ------------------------------------------------------------ envelope
@@ -168,35 +163,15 @@ class ZenohActions:
         self._served: dict[str, ServedGoal] = {}
         self._sent: dict[str, list[RemoteGoal]] = {}
         self._tasks: set[asyncio.Task[None]] = set()
-        self._servers: dict[str, list[str]] = {}  # action → zids of processes serving it (oldest first)
-        self._lock = threading.Lock()
+        self.directory = Directory(session, robot, zid, "action")
         self.stats = {"sent": 0, "served": 0, "server_gone": 0, "unencodable": 0}
-        self._liveliness = session.liveliness().declare_subscriber(
-            f"{PREFIX}/{robot}/alive/action/**", self._on_token, history=True
-        )
 
     # ------------------------------------------------------------ who serves what
-    def _on_token(self, sample: Any) -> None:  # Zenoh's thread
-        head = f"{PREFIX}/{self.robot}/alive/action/"
-        zid, _, name = str(sample.key_expr)[len(head) :].partition("/")
-        if zid == self.zid or not name:
-            return
-        with self._lock:
-            zids = self._servers.setdefault(name, [])
-            if zid in zids:
-                zids.remove(zid)
-            if sample.kind == zenoh.SampleKind.PUT:
-                zids.append(zid)
-
     def server(self, name: str) -> str | None:
-        """The zid of the process that serves ``name`` (the newest), or None."""
-        with self._lock:
-            zids = self._servers.get(name.lstrip("/"))
-            return zids[-1] if zids else None
+        return self.directory.server(name)
 
     def alive(self, name: str, zid: str) -> bool:
-        with self._lock:
-            return zid in self._servers.get(name.lstrip("/"), [])
+        return self.directory.alive(name, zid)
 
     def has(self, name: str) -> bool:
         return self.server(name) is not None
@@ -218,7 +193,7 @@ class ZenohActions:
         queryable = self.session.declare_queryable(
             action_key(self.robot, self.zid, name), on_query, allowed_origin=zenoh.Locality.REMOTE
         )
-        token = self.session.liveliness().declare_token(token_key(self.robot, self.zid, name))
+        token = self.directory.token(name)
         self._offers[name] = _Offer(accept, queryable, token)
 
     def withdraw(self, name: str) -> None:
@@ -231,8 +206,7 @@ class ZenohActions:
     def close(self) -> None:
         for name in list(self._offers):
             self.withdraw(name)
-        with contextlib.suppress(zenoh.ZError):
-            self._liveliness.undeclare()
+        self.directory.close()
         for task in list(self._tasks):
             task.cancel()
         for goals in self._sent.values():

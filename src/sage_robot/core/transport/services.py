@@ -6,7 +6,10 @@ is the request's frame (:mod:`.wire`); the reply is the response's frame, or an 
 ``{"error": "ServiceError" | "ServiceTimeout" | "ServiceUnavailable", "message": ...}`` that
 the caller raises as that :mod:`~sage_robot.core.errors` class. The handler runs on the
 offering bus's loop; the caller waits on its own loop, bounded by the call's timeout (wall
-time, also in the simulator). Actions do not cross processes.
+time, also in the simulator). Each offered service also has a liveliness token
+``sage/<robot>/alive/service/<zid>/<name>``, so ``bus.has_service`` knows the services of the
+other processes (:class:`Directory`; Zenoh drops a dead process's tokens). Actions:
+:mod:`.actions`.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import contextlib
 import json
 import logging
 import re
+import threading
 from collections.abc import Awaitable, Callable
 from concurrent.futures import Future
 from typing import Any
@@ -43,13 +47,55 @@ def service_key(robot: str, name: str) -> str | None:
     return f"{PREFIX}/{robot}/service/{name.lstrip('/')}" if SERVICE_NAME.match(name) else None
 
 
+class Directory:
+    """Which other processes offer which services (or actions): their liveliness tokens
+    ``sage/<robot>/alive/<kind>/<zid>/<name>``, followed from the session's start (with history)."""
+
+    def __init__(self, session: Any, robot: str, zid: str, kind: str) -> None:
+        self.session, self.zid = session, zid
+        self.head = f"{PREFIX}/{robot}/alive/{kind}/"
+        self._servers: dict[str, list[str]] = {}  # name → zids offering it, oldest first
+        self._lock = threading.Lock()
+        self._sub = session.liveliness().declare_subscriber(self.head + "**", self._on_token, history=True)
+
+    def token(self, name: str) -> Any:
+        """This process offers ``name`` (undeclare the token when it stops)."""
+        return self.session.liveliness().declare_token(f"{self.head}{self.zid}/{name.lstrip('/')}")
+
+    def _on_token(self, sample: Any) -> None:  # Zenoh's thread
+        zid, _, name = str(sample.key_expr)[len(self.head) :].partition("/")
+        if zid == self.zid or not name:
+            return
+        with self._lock:
+            zids = self._servers.setdefault(name, [])
+            if zid in zids:
+                zids.remove(zid)
+            if sample.kind == zenoh.SampleKind.PUT:
+                zids.append(zid)
+
+    def server(self, name: str) -> str | None:
+        """The zid of another process that offers ``name`` (the newest), or None."""
+        with self._lock:
+            zids = self._servers.get(name.lstrip("/"))
+            return zids[-1] if zids else None
+
+    def alive(self, name: str, zid: str) -> bool:
+        with self._lock:
+            return zid in self._servers.get(name.lstrip("/"), [])
+
+    def close(self) -> None:
+        with contextlib.suppress(zenoh.ZError):
+            self._sub.undeclare()
+
+
 class ZenohServices:
     """The services a :class:`~sage_robot.core.transport.zenoh_bus.ZenohTransport` offers
     and calls."""
 
     def __init__(self, session: Any, robot: str) -> None:
         self.session, self.robot = session, robot
-        self._offered: dict[str, Any] = {}
+        self.directory = Directory(session, robot, str(session.zid()), "service")
+        self._offered: dict[str, tuple[Any, Any]] = {}
         self.served = 0
         self.called = 0
 
@@ -68,19 +114,22 @@ class ZenohServices:
         def on_query(query: Any) -> None:  # Zenoh's thread
             self._serve(loop, key, call, query)
 
-        self._offered[name] = self.session.declare_queryable(
-            key, on_query, allowed_origin=zenoh.Locality.REMOTE
-        )
+        queryable = self.session.declare_queryable(key, on_query, allowed_origin=zenoh.Locality.REMOTE)
+        self._offered[name] = (queryable, self.directory.token(name))
 
     def withdraw(self, name: str) -> None:
-        queryable = self._offered.pop(name, None)
-        if queryable is not None:
+        for decl in self._offered.pop(name, ()):
             with contextlib.suppress(zenoh.ZError):
-                queryable.undeclare()
+                decl.undeclare()
+
+    def has(self, name: str) -> bool:
+        """Whether another process offers the service ``name`` now."""
+        return service_key(self.robot, name) is not None and self.directory.server(name) is not None
 
     def close(self) -> None:
         for name in list(self._offered):
             self.withdraw(name)
+        self.directory.close()
 
     def _serve(self, loop: asyncio.AbstractEventLoop, key: str, call: Call, query: Any) -> None:
         try:

@@ -109,6 +109,9 @@ class ZenohTransport(Transport):
     async def call(self, name: str, request: Any, timeout: float | None) -> Any:
         return await self.services.call(name, request, timeout)
 
+    def has_service(self, name: str) -> bool:
+        return self.services.has(name)
+
     def remote_actions(self) -> ZenohActions:
         return self.actions
 
