@@ -27,6 +27,7 @@ EXAMPLES = [
     msgs.DiagnosticStatus("mcu", msgs.Level.WARN, "reconnecting", {"port": "/dev/ttyACM0"}),
     msgs.DiagnosticArray(10.0, (msgs.DiagnosticStatus("a", msgs.Level.OK, "fine"),)),
     msgs.Text("hello"),
+    msgs.Utterance("where is the cafe?", "web:127.0.0.1"),
     msgs.Event(11.0, "nav", "arrived", "at the cafe", {"place": "GUELLY_DELLY"}),
     msgs.EStopState(True, "operator"),
     msgs.NodeHealth("web", "running", 1, "", 2.5, True, {"clients": 2}, {"/sage/ui_state": 4.0}),

@@ -8,18 +8,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from sage_robot.brain.tools import ToolCall
+from sage_robot.core.msgs import Utterance as Utterance  # a converse goal naming its conversation
 
 Say = Callable[[str], None]  # called with each sentence to speak, in order
 DEFAULT_SESSION = "robot"  # the robot's own conversation: its microphone, /talk, typed goals
-
-
-@dataclass(frozen=True)
-class Utterance:
-    """A ``converse`` goal that names its conversation (``Text`` goals are the robot's own):
-    each session keeps its own dialogue state."""
-
-    text: str
-    session: str = DEFAULT_SESSION
 
 
 @dataclass

@@ -24,6 +24,7 @@ from sage_robot.core.msgs.std import (
     PowerStatus,
     Text,
     Twist,
+    Utterance,
 )
 
 __all__ = [
@@ -49,6 +50,7 @@ __all__ = [
     "PowerStatus",
     "Text",
     "Twist",
+    "Utterance",
     "from_dict",
     "message",
     "to_dict",

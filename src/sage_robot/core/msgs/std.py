@@ -204,6 +204,16 @@ class Text:
     data: str
 
 
+@message()
+class Utterance:
+    """A ``converse`` goal that names its conversation (``Text`` goals are the robot's own):
+    each session keeps its own dialogue state (``brain.base``; a message, so that a goal from
+    the web's process reaches the brain's)."""
+
+    text: str
+    session: str = "robot"  # brain.base.DEFAULT_SESSION
+
+
 @message("foxglove/Json")
 class EStopState:
     """The latching e-stop (latched on ``/sage/estop``): engaged, and who set it last."""
