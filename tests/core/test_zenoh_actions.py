@@ -127,3 +127,24 @@ def test_envelopes_round_trip_and_refuse_garbage() -> None:
     for bad in (b"", b"\x05\x00\x00\x00{}", zactions.pack(header, [b"abc"])[:-1], b"\x02\x00\x00\x00[]"):
         with pytest.raises(wire.WireError, match="bad envelope"):
             zactions.unpack(bad)
+
+
+async def test_a_local_server_wins_and_nothing_goes_on_the_wire(client: tuple[Bus, Any]) -> None:
+    bus, _ = client
+    await _served(bus)
+
+    async def here(goal: Text, ctx: Any) -> Text:
+        ctx.feedback(Text("local feedback"))
+        return Text(f"local {goal.data}")
+
+    bus.actions.serve(COUNT, here)
+    try:
+        transport = bus.transport
+        assert isinstance(transport, ZenohTransport)
+        before = dict(transport.actions.stats)
+        result = await (await bus.actions.send_goal(COUNT, Text("3"))).result(RESULT_S)
+        assert result.value == Text("local 3")
+        assert transport.actions.stats == before  # neither sent nor served over Zenoh
+    finally:
+        bus.actions.unserve(COUNT)
+    assert bus.actions.has(COUNT)  # the peer's server is still there
