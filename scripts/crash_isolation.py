@@ -53,9 +53,11 @@ TELEOP_PERIOD_S = 0.1  # the teleop command's period (s)
 DRIVE = Twist(0.2, 0.3)  # m/s, rad/s: a slow circle
 MOVING_MPS = 0.05  # faster than this counts as moving (m/s)
 POLL_S = 0.02
+RATE_WINDOW_S = 2.0  # the simulation's real-time factor is taken over this much wall time (s)
 STOPPED_MPS = 0.01  # slower than this counts as at rest (m/s)
 GOAL_S = 120.0  # bound on the navigator taking the goal and the robot driving (s, wall)
-DRIVE_FIRST_S = 2.0  # the robot drives this long under nav before the kill (s, wall)
+DRIVE_FIRST_S = 2.0  # the robot drives this long under nav before the kill (s, simulated)
+DRIVING_MPS = 0.3  # ... and at least this fast at the kill (m/s)
 AT_REST_AFTER_S = 3.0  # watch the robot this long after nav is back: it must stay at rest (s)
 PASSWORD = "crash-isolation-operator"
 
@@ -115,7 +117,10 @@ def page_health(url: str, group: str) -> dict[str, Any]:
     with urllib.request.urlopen(url, timeout=10) as r:
         nodes = json.loads(r.read())["nodes"]
     entry = nodes.get(f"process:{group}", {})
-    return {"state": entry.get("state"), "restarts": entry.get("restarts")}
+    out = {"state": entry.get("state"), "restarts": entry.get("restarts")}
+    members = str(entry.get("stats", {}).get("nodes", "")).split(",")
+    out["nodes"] = {n: nodes.get(n, {}).get("state") for n in members if n}
+    return out
 
 
 def connect(endpoint: str, robot: str) -> Watch:
@@ -227,11 +232,13 @@ def nav_goal_then_kill(w: Watch, web: Web, place: str) -> dict[str, Any]:
         time.sleep(0.5)
     out["goal_accepted_after_s"] = round(time.monotonic() - t0, 2)
     wait(lambda: w.truth and w.truth[-1][2] > MOVING_MPS, GOAL_S, "nav driving the robot")
-    time.sleep(DRIVE_FIRST_S)
+    sim_moving = w.truth[-1][1]
+    wait(lambda: w.truth[-1][1] - sim_moving >= DRIVE_FIRST_S and w.truth[-1][2] >= DRIVING_MPS, GOAL_S,
+         f"nav driving at {DRIVING_MPS:g} m/s")
     procs = w.processes()
     pids = {g: p.stats.get("pid") for g, p in procs.items()}
     out["speed_before_kill_mps"] = round(w.truth[-1][2], 3)
-    recent = [(t, stamp) for t, stamp, _ in list(w.truth) if t > time.monotonic() - DRIVE_FIRST_S]
+    recent = [(t, stamp) for t, stamp, _ in list(w.truth) if t > time.monotonic() - RATE_WINDOW_S]
     if len(recent) > 1:  # how fast simulated time ran just before the kill (the machine's load)
         (w0, s0), (w1, s1) = recent[0], recent[-1]
         out["sim_real_time_factor"] = round((s1 - s0) / (w1 - w0), 2)
@@ -246,6 +253,10 @@ def nav_goal_then_kill(w: Watch, web: Web, place: str) -> dict[str, Any]:
     out["robot_at_rest_after_s"] = round(rest[0] - t_kill, 3)
     out["robot_at_rest_after_sim_s"] = round(rest[1][0] - sim_kill, 3)
     ended = first_after(web.nav, t_kill, lambda m: m.get("done"), BACK_S, "the web's goal ended")
+    with contextlib.suppress(OSError):  # what the pages show while nav is down (one report later)
+        time.sleep(max(0.0, 1.0 - (time.monotonic() - t_kill)))
+        out["page_while_down"] = page_health(f"{web.base}/api/health", "nav")
+        out["page_while_down"]["after_s"] = round(time.monotonic() - t_kill, 2)
     out["web_goal_ended_after_s"] = round(ended[0] - t_kill, 3)
     out["web_goal_end"] = {k: ended[1].get(k) for k in ("state", "reason")}
 
