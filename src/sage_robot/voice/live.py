@@ -24,6 +24,7 @@ from sage_robot.core.clock import Clock
 from sage_robot.core.config.areas import VoiceSettings
 from sage_robot.core.log import StructLogger
 from sage_robot.voice.partial import PartialTranscriber
+from sage_robot.voice.preroll import strip_wake_phrase
 from sage_robot.voice.stt import SpeechToText, Transcript
 from sage_robot.voice.turn import SetUi
 from sage_robot.voice.vad import EndReason, Utterance, UtteranceRecorder
@@ -102,9 +103,10 @@ class LiveTranscripts:
         except Exception as exc:  # a partial is only for show: the final still runs
             self.log.warning("partial transcript failed", error=str(exc))
             return
-        if listen_id == self._listen_id and self.listening() and transcript.text:
+        text = strip_wake_phrase(transcript.text)
+        if listen_id == self._listen_id and self.listening() and text:
             self.partials += 1
-            self.set_ui(asr_partial=transcript.text)
+            self.set_ui(asr_partial=text)
 
     def transcribe_early(self, rec: UtteranceRecorder) -> None:
         """Start Whisper on a pause that will probably end the utterance: if nothing more

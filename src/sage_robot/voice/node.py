@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import re
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -59,11 +58,6 @@ MODEL_LOAD_SIM_S = 3.0
 SIM_OUT_DIR_KEY: ResourceKey[str | Path] = ResourceKey("voice_sim_out_dir")
 # The simulated microphone and speaker, once set up
 SIM_AUDIO_KEY: ResourceKey[tuple[SimMicrophone, SimSpeaker]] = ResourceKey("voice_sim_audio", tuple)
-# A simulated visitor pauses this long after each sentence, as a person does after "Hey Jarvis."
-# while the robot starts to listen (words run on into the wake phrase lose their start: the
-# wake word is detected a few frames after it ends).
-VISITOR_PAUSE_S = 0.8
-SENTENCE_END = re.compile(r"(?<=[.!?])\s+")
 
 
 @dataclass
@@ -226,16 +220,14 @@ class VoiceNode(Node):
         self.bus.publish(DOA, Doa(self.clock.now(), self.doa_angle, self.doa_source))
 
     async def _visitor_says(self, msg: Text) -> None:
-        """Simulation: render ``msg`` with the robot's TTS and speak it into the sim mic, one
-        sentence at a time with :data:`VISITOR_PAUSE_S` after each."""
+        """Simulation: render ``msg`` with the robot's TTS and speak it into the sim mic in
+        one go, as a visitor says "Hey Jarvis. Where is the cafe?" without waiting for the
+        robot (the pipeline finds where the wake phrase ended: no pause is needed)."""
+        if not msg.data.strip():
+            return
         speech = self.models.speech
-        pause = np.zeros(round(VISITOR_PAUSE_S * SAMPLE_RATE_HZ), dtype=np.int16)
-        for sentence in SENTENCE_END.split(msg.data.strip()):
-            if not sentence:
-                continue
-            pcm = await self.clock.offload(speech.synthesize, sentence)
-            self._mic.inject(resample(pcm, speech.sample_rate, SAMPLE_RATE_HZ))
-            self._mic.inject(pause)
+        pcm = await self.clock.offload(speech.synthesize, msg.data)
+        self._mic.inject(resample(pcm, speech.sample_rate, SAMPLE_RATE_HZ))
 
     def _visitor_audio(self, msg: AudioChunk) -> None:
         """Simulation: recorded audio (e.g. a WAV file or a browser upload) into the sim mic."""

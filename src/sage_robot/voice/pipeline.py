@@ -11,6 +11,13 @@ the robot says it did not catch that and listens again (once; then it stays quie
 While the visitor speaks, the utterance so far is transcribed early (on a pause) and
 partially (for the face) by :mod:`live`.
 
+The microphone's last second is kept (:class:`MicHistory`): on a wake word the utterance
+starts where the wake phrase ended in it, not at the detection (which comes a frame or a few
+later), so a visitor who runs on ("Hey Jarvis, where is the cafe") keeps the question's
+first words; the frames since then are replayed into the VAD and the recorder. A wake
+phrase Whisper still hears at the start of the transcript is stripped (:mod:`turn`); a
+transcript that was only the wake phrase gets a follow-up window for the question.
+
 A wake word while the robot thinks or speaks interrupts it (barge-in) — unless the robot
 itself just said something that sounds like the wake word (its reference detector, see
 :mod:`player`): its own voice is ignored. Text on ``/sage/say`` is spoken too.
@@ -41,13 +48,13 @@ from sage_robot.hardware.audio import Microphone
 from sage_robot.voice.live import LiveTranscripts
 from sage_robot.voice.partial import PartialTranscriber
 from sage_robot.voice.player import Mouth
+from sage_robot.voice.preroll import WAKE_ONLY, HeardFrame, MicHistory
 from sage_robot.voice.stt import SpeechToText, Transcript
 from sage_robot.voice.turn import TurnRunner, TurnTimes
 from sage_robot.voice.vad import EndReason, SileroVad, Utterance, UtteranceRecorder
 from sage_robot.voice.wake import Detection, WakeDetector
 
 SELF_ECHO_WINDOW_S = 2.5  # a wake heard this soon after the robot "said" one is its own echo
-WAKE_TAIL_S = 0.24  # audio right after a detection is the end of the wake phrase: skipped
 # Navigator states in which the robot is on its way (the face shows "navigating" when idle).
 MOVING_NAV_STATES = frozenset(
     {NavState.PLANNING, NavState.DRIVING, NavState.WAITING_FOR_PEOPLE, NavState.RECOVERING}
@@ -93,7 +100,7 @@ class VoicePipeline:
         self.turn = TurnRunner(bus, clock, settings, mouth, stt, self._set_ui, self.log)
         self._times: TurnTimes | None = None
         self._turn_task: asyncio.Task[None] | None = None
-        self._skip_s = 0.0
+        self.history = MicHistory()  # the last second of frames: where the wake phrase ended
         self._follow_up = False
         self._say_task: asyncio.Task[int] | None = None
         self._asked_again = False  # the last turn ended in "did not catch that"
@@ -162,29 +169,44 @@ class VoicePipeline:
             self.live.close()
             await self._stop_turn()
 
-    def _analyse(self, frame: np.ndarray) -> tuple[list[Detection], float]:
+    def _analyse(self, frame: np.ndarray) -> tuple[list[Detection], float, dict[str, float]]:
         detections = self.wake.feed(frame)
         prob = self.vad.frame_probability(frame) if self.state is State.LISTENING else 0.0
-        return detections, prob
+        return detections, prob, dict(self.wake.last_scores)
+
+    def _vad_probabilities(self, frames: list[np.ndarray]) -> list[float]:
+        return [self.vad.frame_probability(f) for f in frames]
 
     async def process_frame(self, frame: np.ndarray) -> None:
         # When the frame was captured (a mic that lags still gets its echo right).
         frame_t = getattr(self.mic, "frame_time", None) or self.clock.now()
-        detections, prob = await self.clock.offload(self._analyse, frame)
+        detections, prob, scores = await self.clock.offload(self._analyse, frame)
+        self.history.append(frame, frame_t, scores)
         detections = [d for d in detections if not self._own_voice(d, frame_t)]
-        if detections:
-            self._on_wake(detections[0])
-        if self.state is State.LISTENING and self.mouth.audible(frame_t):
-            return  # the robot's own voice: not the visitor's utterance
-        if self.state is State.LISTENING:
-            if self._skip_s > 0:
-                self._skip_s -= len(frame) / SAMPLE_RATE_HZ
-                return
-            utt = self.recorder.push(frame, prob)
-            if utt is not None:
-                self._on_utterance(utt)
-            else:
-                self.live.update(self.recorder)
+        if detections and self._on_wake(detections[0]):
+            # This frame and those before it since the wake phrase ended: the VAD and the
+            # recorder start on them (the visitor may have run on into the question).
+            await self._replay(*self.history.after_wake(detections[0].model))
+            return
+        self._listen(frame, frame_t, prob)
+
+    async def _replay(self, lead_in: list[HeardFrame], frames: list[HeardFrame]) -> None:
+        for f in lead_in:
+            if not self.mouth.audible(f.time_s):
+                self.recorder.lead_in(f.pcm)
+        probs = await self.clock.offload(self._vad_probabilities, [f.pcm for f in frames])
+        for f, prob in zip(frames, probs, strict=True):
+            self._listen(f.pcm, f.time_s, prob)
+
+    def _listen(self, frame: np.ndarray, frame_t: float, prob: float) -> None:
+        """One frame (and its speech probability) into the utterance, while listening."""
+        if self.state is not State.LISTENING or self.mouth.audible(frame_t):
+            return  # not listening, or the robot's own voice: not the visitor's utterance
+        utt = self.recorder.push(frame, prob)
+        if utt is not None:
+            self._on_utterance(utt)
+        else:
+            self.live.update(self.recorder)
 
     def _own_voice(self, det: Detection, frame_t: float) -> bool:
         t = self.mouth.last_self_wake
@@ -194,10 +216,11 @@ class VoicePipeline:
             return True
         return False
 
-    def _on_wake(self, det: Detection) -> None:
+    def _on_wake(self, det: Detection) -> bool:
+        """A wake word: a new turn starts listening (True), or it is ignored (False)."""
         self.detections.append(det)
         if self.state is State.LISTENING and self.recorder.started and not self._follow_up:
-            return  # already recording what the visitor says after the wake word
+            return False  # already recording what the visitor says after the wake word
         busy = self.state is State.BUSY or self.mouth.speaking
         if busy:
             self.barge_ins += 1
@@ -212,6 +235,7 @@ class VoicePipeline:
         self.turns += 1
         self._times = TurnTimes(self.turns, self.clock.now())
         self._start_listening(self.settings.no_speech_timeout_s, follow_up=False)
+        return True
 
     def _start_listening(self, timeout_s: float, follow_up: bool) -> None:
         self.state = State.LISTENING
@@ -220,7 +244,6 @@ class VoicePipeline:
         self.recorder.start_timeout_s = timeout_s
         self.vad.reset()
         self.live.start()
-        self._skip_s = 0.0 if follow_up else WAKE_TAIL_S
         self._set_ui(phase=Phase.LISTENING, asr_partial="", asr_final="", llm_tokens="",
                      error_msg="", tts_viseme=0.0)  # fmt: skip
 
@@ -250,6 +273,8 @@ class VoicePipeline:
             transcript = await self.turn.transcribe(utt, times, early)
             if self.turn.unclear(transcript):  # never act on text the STT is unsure of
                 follow_up = await self._not_caught(times)
+            elif transcript.rejected == WAKE_ONLY:  # "Hey Jarvis." alone: listen for the question
+                follow_up = True
             elif not transcript.empty:  # nothing said: back to resting, not stuck "thinking"
                 self._asked_again = False
                 follow_up = await self.turn.converse(transcript.text, times)

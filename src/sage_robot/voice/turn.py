@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 from sage_robot.core.bus import Bus
@@ -23,6 +23,7 @@ from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.voice import Phase, TurnLatency
 from sage_robot.core.topics import CONVERSE, HEARD, TURN_LATENCY
 from sage_robot.voice.player import Mouth
+from sage_robot.voice.preroll import WAKE_ONLY, strip_wake_phrase
 from sage_robot.voice.stt import SpeechToText, Transcript
 from sage_robot.voice.vad import Utterance
 
@@ -77,11 +78,16 @@ class TurnRunner:
         self, utt: Utterance, times: TurnTimes, early: asyncio.Future[Transcript] | None = None
     ) -> Transcript:
         """The utterance's transcript (``early`` when it was started on the pause); a
-        non-empty one is shown on the face and published on ``/sage/heard``."""
+        non-empty one is shown on the face and published on ``/sage/heard``. A wake phrase
+        at its start ("Hey Jarvis, where is ...": the visitor ran on) is left out; one that
+        was all of it gives an empty transcript rejected as ``WAKE_ONLY``."""
         if early is not None:
             transcript = await early
         else:
             transcript = await self.clock.offload(self.stt.transcribe, utt.pcm, True)
+        text = strip_wake_phrase(transcript.text)
+        if text != transcript.text:
+            transcript = replace(transcript, text=text, rejected="" if text else WAKE_ONLY)
         times.stt_done = self.clock.now()
         times.transcript = transcript.text
         self.log.info("heard", text=transcript.text, reason=utt.reason.value,

@@ -156,6 +156,12 @@ class UtteranceRecorder:
         """The utterance so far (pre-roll included)."""
         return np.concatenate(self._frames) if self._frames else np.zeros(0, dtype=np.int16)
 
+    def lead_in(self, frame: np.ndarray) -> None:
+        """Audio before the first frame to be judged: into the pre-roll only (it is part of
+        the utterance if speech starts within the pre-roll's length)."""
+        if not self._started:
+            self._preroll.append(frame)
+
     def push(self, frame: np.ndarray, prob: float) -> Utterance | None:
         """Add one frame; returns the utterance when it has ended."""
         speech = prob >= self.threshold
