@@ -35,8 +35,8 @@ def piper16k(models, text: str, length_scale: float) -> np.ndarray:
         piper.length_scale = None
 
 
-# Before the fix (the utterance started 0.24 s after the detection) Whisper heard the
-# question whole on none of the last five: "the cap.", "the cafe.", "Okay.", "Here's the cafe."
+# Before the fix (the utterance started 0.24 s after the detection) four of these failed at
+# this offset: nothing heard (no comma), "the cafe." (faster, en-gb), "Okay." (en-us+f3).
 RUN_ONS = {
     "piper": lambda models, say16k: say16k(ONE_BREATH),
     "piper, no comma": lambda models, say16k: say16k("Hey Jarvis where is the cafe?"),
