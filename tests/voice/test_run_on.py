@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from sage_robot.core.audio import FRAME_SAMPLES, SAMPLE_RATE_HZ
+from sage_robot.core.msgs.voice import Phase
 from sage_robot.voice.audio_io import resample
 from sage_robot.voice.preroll import MicHistory, strip_wake_phrase, wake_phrase_end
 from sage_robot.voice.tts import EspeakEngine
@@ -118,3 +119,31 @@ def test_history_gives_the_lead_in_and_the_frames_from_the_rise():
 )
 def test_wake_phrase_is_stripped_from_the_transcript(heard, question):
     assert strip_wake_phrase(heard) == question
+
+
+class _WakeOnlyStt:
+    """The real recognizer, but all it heard was the wake phrase."""
+
+    def __init__(self, stt) -> None:
+        self.stt = stt
+
+    def transcribe(self, pcm, *args):
+        heard = self.stt.transcribe(pcm, *args)
+        return type(heard)("Hey, Jarvis.", 0.9, heard.no_speech_prob, heard.duration_s)
+
+
+async def test_a_transcript_of_only_the_wake_phrase_listens_for_the_question(voice_settings, models, say16k):
+    room = Room(voice_settings, models)
+    goals: list[str] = []
+    echo_brain(room.bus, room.clock, goals)
+    wake_only = _WakeOnlyStt(room.pipeline.turn.stt)
+    room.pipeline.turn.stt = room.pipeline.live.stt = wake_only  # type: ignore[assignment]
+    room.mic.inject(np.concatenate([silence(0.5), say16k("Hey Jarvis."), silence(0.5),
+                                    say16k("Where is the library?"), silence(0.8)]))  # fmt: skip
+    async with room:
+        await room.until(lambda: room.latency and room.idle(), "the turns to end")
+    assert not goals  # the wake phrase is never a question for the brain
+    assert not room.heard
+    phases = room.phases()
+    thinking = phases.index(Phase.THINKING)
+    assert Phase.LISTENING in phases[thinking:], phases  # a follow-up window for the question
