@@ -103,6 +103,7 @@ class ServedGoal(GoalHandle):
         self.seq = 0
         self.log: deque[tuple[int, Any]] = deque(maxlen=FEEDBACK_QUEUE)
         self.news = asyncio.Event()
+        self.on_finish: Callable[[], None] | None = None
 
     def _push_feedback(self, msg: Any) -> None:
         if self.done:
@@ -114,8 +115,12 @@ class ServedGoal(GoalHandle):
         self._poke()
 
     def _finish(self, result: ActionResult) -> None:
+        if self.done:
+            return
         super()._finish(result)
         self._poke()
+        if self.on_finish is not None:
+            self.on_finish()
 
     def _poke(self) -> None:
         self.news.set()
@@ -248,8 +253,13 @@ class ZenohActions:
             if not isinstance(handle, ServedGoal):
                 raise ValueError(f"no node serves the action {name} here any more")
             self._served[token] = handle
+            handle.on_finish = lambda: self._forget_later(token)
             self.stats["served"] += 1
         return b'{"accepted":true}'
+
+    def _forget_later(self, token: str) -> None:
+        """An ended goal's result stays for its client's poll a while (even a client that died)."""
+        asyncio.get_running_loop().call_later(FINISHED_KEEP_S, self._served.pop, token, None)
 
     async def _poll(self, token: str, after: Any) -> bytes:
         goal = self._served.get(token)
@@ -277,7 +287,6 @@ class ZenohActions:
                 except TypeError as exc:
                     why = f"(the result cannot leave the process: {exc})"
                     header["message"] = f"{result.message} {why}".strip()
-            asyncio.get_running_loop().call_later(FINISHED_KEEP_S, self._served.pop, token, None)
         return pack(header, frames)
 
     # ------------------------------------------------------------ sending
@@ -320,7 +329,9 @@ class ZenohActions:
             return
         reply = await self._query(goal, {"op": "goal", "goal": goal.token}, frame, GOAL_ACCEPT_S)
         if reply.kind != "ok":
-            goal._finish(_aborted(self._why(goal, reply, "take the goal")))
+            goal._finish(_aborted(self._why(goal, reply, "take the goal", silent_s=GOAL_ACCEPT_S)))
+            if reply.kind == "timeout":  # it may have arrived late: it must not run unwatched
+                self.send_cancel_anyway(goal)
             return
         goal.accepted = True
         if goal.cancel_requested:
@@ -369,12 +380,14 @@ class ZenohActions:
         seq = header.get("seq", after)
         return seq if isinstance(seq, int) else after
 
-    def _why(self, goal: RemoteGoal, reply: _Reply, what: str, gone: bool = False) -> str:
+    def _why(
+        self, goal: RemoteGoal, reply: _Reply, what: str, gone: bool = False, silent_s: float = SILENT_S
+    ) -> str:
         if reply.kind == "err":
             return f"the {goal.name} server could not {what}: {reply.payload.decode('utf-8', 'replace')}"
         if gone or reply.kind == "none":
             return f"the process serving {goal.name} went away before it could {what}"
-        return f"the process serving {goal.name} did not answer (to {what}) for {SILENT_S:g} s"
+        return f"the process serving {goal.name} did not answer (to {what}) for {silent_s:g} s"
 
     async def _query(
         self, goal: RemoteGoal, att: dict[str, Any], payload: bytes | None, limit: float
