@@ -38,11 +38,12 @@ def test_inflation_follows_nav2_decay() -> None:
     lethal[0, 0] = True
     cost, _dist = inflate(lethal, 0.05, 0.25, 0.55, 3.0)
     assert cost[0, 0] == LETHAL
-    assert (cost[0, 1:6] == INSCRIBED).all()  # 0.05 .. 0.25 m: inscribed
-    d = 0.40
-    i = round(d / 0.05)
+    # distances run from a cell's centre to the lethal cell's face: cell i is (i - 0.5) cells away
+    assert (cost[0, 1:6] == INSCRIBED).all()  # 0.025 .. 0.225 m: inscribed
+    i = 8
+    d = (i - 0.5) * 0.05
     assert cost[0, i] == int(MAX_NON_OBSTACLE * math.exp(-3.0 * (d - 0.25)))
-    assert cost[0, 12] == 0  # 0.60 m > inflation radius
+    assert cost[0, 12] == 0  # 0.575 m > inflation radius
     assert np.all(np.diff(cost[0, 5:12].astype(int)) <= 0)  # decays outward
 
 
