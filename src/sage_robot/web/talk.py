@@ -150,7 +150,7 @@ def robot_mic_available(request: Request) -> bool:
 def robot_mic_words(wake: str, question: str) -> str:
     """What the simulated visitor says: the wake phrase as a sentence of its own, then the
     question ("Hey jarvis. Where is the cafe"); a wake phrase typed in front is not said twice.
-    The voice node pauses after each sentence, as a visitor waits for the robot to listen."""
+    The simulated visitor says it in one go: the pipeline keeps words run on into the wake phrase."""
     if question.lower().startswith(wake):
         question = question[len(wake):].lstrip(" ,.!?;:")
     said = f"{wake[:1].upper()}{wake[1:]}."
