@@ -49,12 +49,13 @@ if TYPE_CHECKING:
     from sage_robot.sim.audio import SimMicrophone, SimSpeaker
 
 T = TypeVar("T")
-# Where the simulated speaker writes WAV files (optional)
 # On the simulated clock the models load as a lockstep job that lands at this simulated time
 # after the node starts (the world steps on beside it, then waits for it if need be), so the
-# voice comes up at the same simulated moment on every run, whatever the machine's load.
-MODEL_LOAD_SIM_S = 3.0
+# voice comes up at the same simulated moment on every run, whatever the machine's load. Long
+# enough that a real-time `sage sim` does not stand still while they load (5-15 s here).
+MODEL_LOAD_SIM_S = 10.0
 
+# Where the simulated speaker writes WAV files (optional)
 SIM_OUT_DIR_KEY: ResourceKey[str | Path] = ResourceKey("voice_sim_out_dir")
 # The simulated microphone and speaker, once set up
 SIM_AUDIO_KEY: ResourceKey[tuple[SimMicrophone, SimSpeaker]] = ResourceKey("voice_sim_audio", tuple)
