@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import time
 
 import pytest
 
@@ -65,3 +66,37 @@ def test_the_clock_message_round_trips_through_json_and_the_wire() -> None:
     assert from_dict(to_dict(msg)) == msg
     wire = pytest.importorskip("sage_robot.core.transport.wire")
     assert wire.decode(wire.encode(msg)) == msg
+
+
+def test_between_messages_a_follower_moves_on_at_the_announced_pace_but_not_past_the_limit() -> None:
+    from sage_robot.core.clock_follow import AHEAD_LIMIT_S
+
+    async def body() -> None:
+        clock = FollowerClock()
+        clock.follow(10.0, speed=1.0)  # the simulator runs in real time
+        start = time.monotonic()
+        await clock.sleep(AHEAD_LIMIT_S / 2)  # no message comes: the pace wakes it
+        woke_after = time.monotonic() - start
+        assert clock.now() >= 10.0 + AHEAD_LIMIT_S / 2
+        assert woke_after >= AHEAD_LIMIT_S / 2 - 0.01
+        # Past the limit only a message moves time: a sleeper beyond it waits for one.
+        late = asyncio.get_running_loop().create_task(clock.sleep_until(10.0 + 3 * AHEAD_LIMIT_S))
+        await asyncio.sleep(2 * AHEAD_LIMIT_S)
+        assert clock.now() <= 10.0 + AHEAD_LIMIT_S + 1e-9
+        assert not late.done()
+        clock.follow(10.0 + 3 * AHEAD_LIMIT_S, speed=1.0)
+        await asyncio.wait_for(late, 1.0)
+        clock.follow(10.0, speed=1.0)  # a late message: time stays
+        assert clock.now() >= 10.0 + 3 * AHEAD_LIMIT_S
+
+    asyncio.run(body())
+
+
+def test_a_clock_that_is_not_paced_moves_only_with_its_messages() -> None:
+    async def body() -> None:
+        clock = FollowerClock()
+        clock.follow(5.0)  # speed 0: a simulator running as fast as it can
+        await asyncio.sleep(0.05)
+        assert clock.now() == 5.0
+
+    asyncio.run(body())

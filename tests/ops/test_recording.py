@@ -156,3 +156,59 @@ async def test_foxglove_server_advertises_live_topics():
         assert node.stats()["errors"] == 0
     finally:
         await node.teardown()
+
+
+async def test_foxglove_converts_a_topic_only_for_a_viewer_who_subscribed_and_wants_all_while_watched():
+    import websockets
+    from websockets.typing import Subprotocol
+
+    clock = SimClock()
+    bus = Bus(clock)
+    ctx = NodeContext(
+        bus, clock, load_profile(None, {"ops": {"foxglove_host": "127.0.0.1", "foxglove_port": 0}})
+    )
+    node = FoxgloveNode(ctx)
+    await node.setup()
+    try:
+        bus.publish("/odom", Odometry(0.0, Pose2D(1, 2, 0), Twist()))  # advertises the channel
+        assert node._release_all is None  # nobody watches: other processes' topics stay away
+        url = f"ws://127.0.0.1:{node.port}"
+        protocols = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
+        async with websockets.connect(url, subprotocols=protocols) as ws:
+            channels: dict[str, int] = {}
+            for _ in range(20):  # bounded: serverInfo, advertise, ...
+                raw = await asyncio.wait_for(ws.recv(), 5)
+                if isinstance(raw, str) and json.loads(raw)["op"] == "advertise":
+                    channels = {c["topic"]: c["id"] for c in json.loads(raw)["channels"]}
+                    break
+            assert node.gate.viewers == 1
+            assert node._release_all is not None
+            sent = node.sent
+            bus.publish("/odom", Odometry(0.1, Pose2D(1, 2, 0), Twist()))
+            assert node.sent == sent  # advertised, not subscribed: not converted
+            subscribe = {"op": "subscribe", "subscriptions": [{"id": 7, "channelId": channels["/odom"]}]}
+            await ws.send(json.dumps(subscribe))
+
+            async def data() -> bytes | None:
+                bus.publish("/odom", Odometry(0.2, Pose2D(1, 2, 0), Twist()))  # until the subscription took
+                try:
+                    raw = await asyncio.wait_for(ws.recv(), 0.2)
+                except asyncio.TimeoutError:
+                    return None
+                return raw if isinstance(raw, bytes) and raw[:1] == b"\x01" else None  # MessageData
+
+            for _ in range(50):  # bounded: 10 s
+                if await data():
+                    break
+            else:
+                raise AssertionError("no /odom message reached the subscribed viewer")
+            assert node.sent > sent
+        for _ in range(100):  # bounded: the gate sees the viewer go
+            if node.gate.viewers == 0:
+                break
+            await asyncio.sleep(0.05)
+        assert node.gate.viewers == 0
+        assert node._release_all is None
+        assert node.stats()["errors"] == 0
+    finally:
+        await node.teardown()

@@ -127,7 +127,7 @@ async def run_group(
         if parent_pipe:
             watch_parent(launcher)
         if isinstance(clock, SimClock):
-            tasks.append(publish_clock(ctx.bus, clock))
+            tasks.append(publish_clock(ctx.bus, clock, ctx.settings.sim.speed))
         if export_port:
             tasks.append(asyncio.get_running_loop().create_task(keep_port_link(ctx, Path(export_port))))
 

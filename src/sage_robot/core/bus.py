@@ -56,16 +56,18 @@ class Topic(str, Generic[M]):
     """
 
     msg_type: type[M]
+    latched: bool
 
-    def __new__(cls, name: str, msg_type: type[M]) -> Topic[M]:
+    def __new__(cls, name: str, msg_type: type[M], latched: bool = False) -> Topic[M]:
         self = super().__new__(cls, name)
         self.msg_type = msg_type
+        self.latched = latched  # in every process that uses it, publisher's or reader's
         return self
 
     # Pickling and copying rebuild it with its type. This return type also sets a Topic apart
     # from a plain str to the type checker (see PlainName): keep it.
-    def __getnewargs__(self) -> tuple[str, type[M]]:  # type: ignore[override]
-        return (str(self), self.msg_type)
+    def __getnewargs__(self) -> tuple[str, type[M], bool]:  # type: ignore[override]
+        return (str(self), self.msg_type, self.latched)
 
 
 class PlainName(Protocol):
@@ -81,13 +83,23 @@ class Transport(ABC):
     """Carries publications beyond this process. The bus calls :meth:`send` for every local
     publication and hands :meth:`attach` a function that delivers remote ones locally (from
     any thread: the bus moves them onto its loop; a process's own publications must not come
-    back to it)."""
+    back to it). Only the topics the bus asked for with :meth:`want` (or all of them while
+    :meth:`want_all` holds) need to come in."""
 
     @abstractmethod
     def attach(self, deliver: Callable[[str, Any], None]) -> None: ...
 
     @abstractmethod
     def send(self, topic: str, msg: Any) -> None: ...
+
+    def want(self, topic: str, latched: bool) -> None:  # noqa: B027 - optional hook
+        """A node here reads ``topic`` (asked once per topic): deliver other processes'
+        publications on it from now on; for a latched topic, also the last one already made."""
+
+    def want_all(self) -> Callable[[], None]:
+        """Deliver every topic until the returned function is called (a recorder, a live
+        view). Holds nest."""
+        return lambda: None
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release sockets; the default transport has none."""
@@ -227,6 +239,10 @@ class Bus:
         self._topics: dict[str, TopicInfo] = {}
         self._services: dict[str, ServiceInfo] = {}
         self._taps: list[Callable[[str, Any], None]] = []
+        self._wanted: set[str] = set()  # topics asked of the transport
+        self._inbox: deque[tuple[str, Any]] = deque()  # remote messages on their way to the loop
+        self._inbox_lock = threading.Lock()
+        self._drain_due = False
         self._loop: asyncio.AbstractEventLoop | None = None
         self._loop_thread: int | None = None
         self.transport.attach(self._deliver_remote)  # last: remote messages may come at once
@@ -243,7 +259,10 @@ class Bus:
     def declare(self, name: PlainName, msg_type: type, latched: bool = False) -> TopicInfo: ...
     def declare(self, name: Any, msg_type: type | None = None, latched: bool = False) -> TopicInfo:
         """Declare a topic's type (first use wins; a different type later is an error).
-        A :class:`Topic` brings its own type."""
+        A :class:`Topic` brings its own type and whether it is latched. Declaring a topic
+        latched here means reading it: its last value comes from other processes too."""
+        if isinstance(name, Topic):
+            latched = latched or name.latched
         if msg_type is None:
             if not isinstance(name, Topic):
                 raise TypeError(f"topic {name}: declare it with its message type")
@@ -256,6 +275,8 @@ class Bus:
         elif info.msg_type is not msg_type:
             raise TypeError(f"topic {name} carries {info.msg_type.__name__}, not {msg_type.__name__}")
         info.latched = info.latched or latched
+        if latched:
+            self._want(name, True)
         return info
 
     def _info(self, name: str, msg: Any) -> TopicInfo:
@@ -306,12 +327,31 @@ class Bus:
         type, then as a local publication (never sent back out)."""
         loop = self._loop
         if loop is None or loop.is_closed():
+            info = self._topics.get(name)
+            if loop is None and info is not None and info.latched and isinstance(msg, info.msg_type):
+                info.last = msg  # a latched value before anyone here subscribed: kept for them
+                return
             self.remote_rejected += 1  # nobody here has subscribed or published yet
             return
         if threading.get_ident() != self._loop_thread:
+            # One wake-up of the loop for a burst (odometry, battery and /clock of one tick).
+            self._inbox.append((name, msg))
+            with self._inbox_lock:
+                if self._drain_due:
+                    return
+                self._drain_due = True
             with contextlib.suppress(RuntimeError):  # the loop closed in between: shutting down
-                loop.call_soon_threadsafe(self._deliver_remote, name, msg)
+                loop.call_soon_threadsafe(self._drain_inbox)
             return
+        self._take_remote(name, msg)
+
+    def _drain_inbox(self) -> None:
+        with self._inbox_lock:
+            self._drain_due = False
+        while self._inbox:
+            self._take_remote(*self._inbox.popleft())
+
+    def _take_remote(self, name: str, msg: Any) -> None:
         info = self._topics.get(name)
         if info is not None and not isinstance(msg, info.msg_type):
             self.remote_rejected += 1
@@ -322,7 +362,8 @@ class Bus:
 
     def add_tap(self, tap: Callable[[str, Any], None]) -> Callable[[], None]:
         """See every publication on every topic (recorders, live views). Returns a remover.
-        A tap runs inside ``publish``: it must be quick and must not raise."""
+        A tap runs inside ``publish``: it must be quick and must not raise. It sees other
+        processes' publications only on topics wanted here (:meth:`want`, :meth:`want_all`)."""
         self._taps.append(tap)
         return lambda: self._taps.remove(tap) if tap in self._taps else None
 
@@ -352,6 +393,7 @@ class Bus:
         """Subscribe to a topic. With a callback, a task calls it for each message."""
         info = self.declare(name, msg_type)
         self._bind_loop()
+        self._want(name, info.latched)
         sub: Subscription[M] = Subscription(self, info, maxsize)
         info.subscribers.append(sub)
         if info.latched and info.last is not None:
@@ -365,9 +407,29 @@ class Bus:
     @overload
     def latest(self, name: PlainName) -> Any: ...
     def latest(self, name: Any) -> Any:
-        """The last value of a latched topic, or None."""
+        """The last value of a latched topic, or None. (In a process that did not declare the
+        topic before, other processes' values come in from this first read on.)"""
         info = self._topics.get(name)
+        self._want(name, bool(info and info.latched))
         return info.last if info else None
+
+    def want(self, name: str) -> None:
+        """Have other processes' publications on ``name`` delivered here, for a tap (a
+        subscription, a latched declaration or :meth:`latest` ask for theirs already)."""
+        info = self._topics.get(name)
+        self._want(name, bool(info and info.latched) or bool(isinstance(name, Topic) and name.latched))
+
+    def want_all(self) -> Callable[[], None]:
+        """Have other processes' publications on every topic delivered here (a recorder or a
+        live view of everything) until the returned function is called."""
+        self._bind_loop()  # where they will be delivered
+        return self.transport.want_all()
+
+    def _want(self, name: str, latched: bool) -> None:
+        self._bind_loop()
+        if name not in self._wanted:
+            self._wanted.add(name)
+            self.transport.want(name, latched)
 
     def topics(self) -> dict[str, TopicInfo]:
         return dict(self._topics)

@@ -2,7 +2,8 @@
 
 One table, so a typo is an import error and a reader sees every channel in one place. Each
 topic is declared once, with the message type it carries (:class:`~sage_robot.core.bus.Topic`):
-the type checker holds every publisher and subscriber to it. Services and actions are names.
+the type checker holds every publisher and subscriber to it. A latched topic (its last value
+kept for late readers) is latched in every process that uses it. Services and actions are names.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ ODOM = Topic("/odom", Odometry)  # wheel odometry from the MCU
 IMU = Topic("/imu/data", Imu)
 BATTERY = Topic("/battery_state", BatteryState)
 SCAN = Topic("/scan", LaserScan)  # in the lidar frame
-MAP = Topic("/map", OccupancyGrid)  # latched
+MAP = Topic("/map", OccupancyGrid, latched=True)
 AMCL_POSE = Topic("/amcl_pose", PoseWithCovariance)  # in the map frame
 INITIAL_POSE = Topic("/initialpose", PoseWithCovariance)  # set the localization
 PLAN = Topic("/plan", Path)  # the global plan
@@ -52,15 +53,16 @@ HEARD = Topic("/sage/heard", Text)  # final transcript of a visitor turn (voice 
 AUDIO_OUT = Topic("/sage/audio_out", AudioChunk)  # the robot's speech, for the web pages
 TURN_LATENCY = Topic("/sage/voice/latency", TurnLatency)  # per-turn latency breakdown
 DIAGNOSTICS = Topic("/diagnostics", DiagnosticArray)  # node health, ROS style (levels and strings)
-HEALTH = Topic("/sage/health", HealthReport)  # latched: the launcher's record of every node
-ESTOP = Topic("/sage/estop", EStopState)  # latched: the operator's latching e-stop
+HEALTH = Topic("/sage/health", HealthReport, latched=True)  # the launcher's record of every node
+ESTOP = Topic("/sage/estop", EStopState, latched=True)  # the operator's latching e-stop
 MCU_STATUS = Topic("/mcu/status", DiagnosticStatus)  # serial link state and statistics
-NAV_STATE = Topic("/nav/state", NavigateFeedback)  # the navigator's state whoever sent the goal
+NAV_STATE = Topic("/nav/state", NavigateFeedback, latched=True)  # the navigator's state whoever sent the goal
 #   (published on every change and at 1 Hz while a goal runs; IDLE when none)
-COSTMAP = Topic("/nav/costmap", OccupancyGrid)  # latched: the local costmap (1 Hz), the teleop map's layer
+# the local costmap (1 Hz), the teleop map's layer
+COSTMAP = Topic("/nav/costmap", OccupancyGrid, latched=True)
 LOC_HEALTH = Topic("/localization/health", LocalizationHealth)
 MAP_ODOM = Topic("/localization/map_odom", PoseStamped)  # pose of the odom frame in the map (map->odom)
-TOUR_STATE = Topic("/sage/tour", TourState)  # latched: the visitor's tour (brain's tour node)
+TOUR_STATE = Topic("/sage/tour", TourState, latched=True)  # the visitor's tour (brain's tour node)
 
 # Simulator-only truth (tests and benchmarks read these; nodes above sim never do)
 SIM_TRUTH = Topic("/sim/ground_truth", Odometry)  # in the map frame

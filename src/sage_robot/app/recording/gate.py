@@ -24,6 +24,7 @@ import contextlib
 import hashlib
 import hmac
 import ipaddress
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
@@ -155,11 +156,20 @@ def check(request: Upgrade, token: str | None, origins: tuple[str, ...]) -> Refu
 class FoxgloveGate:
     """Listens on the public address; admits checked clients to ``127.0.0.1:upstream_port``."""
 
-    def __init__(self, upstream_port: int, token: str | None, origins: tuple[str, ...], log: Any) -> None:
+    def __init__(
+        self,
+        upstream_port: int,
+        token: str | None,
+        origins: tuple[str, ...],
+        log: Any,
+        on_viewers: Callable[[int], None] | None = None,
+    ) -> None:
         self.upstream_port = upstream_port
         self.token = token
         self.origins = origins
         self.log = log
+        self.on_viewers = on_viewers  # called with the number of viewers whenever it changes
+        self.viewers = 0
         self.counts = {"admitted": 0, "refused": 0}
         self._tasks: set[asyncio.Task[None]] = set()
         self._server: asyncio.Server | None = None
@@ -211,13 +221,20 @@ class FoxgloveGate:
             return
         up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
         self.counts["admitted"] += 1
+        self._viewers(+1)
         try:
             up_writer.write(request.forwarded())
             await _relay_both(reader, writer, up_reader, up_writer)
         finally:
+            self._viewers(-1)
             up_writer.close()
             with contextlib.suppress(Exception):
                 await up_writer.wait_closed()
+
+    def _viewers(self, change: int) -> None:
+        self.viewers += change
+        if self.on_viewers is not None:
+            self.on_viewers(self.viewers)
 
     async def _refuse(
         self, writer: asyncio.StreamWriter, refusal: Refusal, peer: Any, origin: str | None = None

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +34,8 @@ class RecorderNode(Node):
         self.recorder = McapRecorder(path)
         self.errors = 0
         self._remove_tap = self.bus.add_tap(self._tap)
+        for topic in sorted(self.topics):  # from other processes too
+            self.bus.want(topic)
         self.log.info("recording", path=str(path), topics=len(self.topics))
 
     def _tap(self, topic: str, msg: Any) -> None:
@@ -107,7 +109,8 @@ class FoxgloveNode(Node):
 
             token = foxglove_token(operator_password(self.settings))
         origins = (*self.settings.web.allowed_origins, *ops.foxglove_origins)
-        self.gate = FoxgloveGate(self.server.port, token, origins, self.log)
+        self._release_all: Callable[[], None] | None = None
+        self.gate = FoxgloveGate(self.server.port, token, origins, self.log, self._on_viewers)
         try:
             self.port = await self.gate.start(ops.foxglove_host, ops.foxglove_port)
         except OSError as exc:
@@ -142,7 +145,18 @@ class FoxgloveNode(Node):
             )
         return found
 
+    def _on_viewers(self, viewers: int) -> None:
+        """Every topic of every process comes here while someone watches, none otherwise."""
+        if viewers > 0 and self._release_all is None:
+            self._release_all = self.bus.want_all()
+        elif viewers == 0 and self._release_all is not None:
+            self._release_all()
+            self._release_all = None
+
     def _tap(self, topic: str, msg: Any) -> None:
+        known = self._channels.get(topic)
+        if known is not None and not known[0].has_sinks():
+            return  # advertised, but no viewer subscribes: no conversion, no encoding
         now = self.clock.now()
         if isinstance(msg, OccupancyGrid):
             if now - self._last_map < self.settings.ops.foxglove_map_period_s:
@@ -160,6 +174,7 @@ class FoxgloveNode(Node):
 
     async def teardown(self) -> None:
         self._remove_tap()
+        self._on_viewers(0)
         await self.gate.stop()
         self.server.stop()
 

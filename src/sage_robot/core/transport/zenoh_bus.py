@@ -2,10 +2,16 @@
 
 Inside the process nothing changes: the bus hands local subscribers the object itself. Each
 publication is also put on ``sage/<robot>/topic/<name>`` — encoded (:mod:`.wire`) only while
-some other process subscribes to it, so an unwatched camera costs nothing. Remote
-publications arrive on Zenoh's thread, are decoded there and handed to the bus, which
-delivers them on its loop. Publishers send only to remote subscribers and the subscriber
-takes only remote samples (Zenoh's locality), so a process never hears itself.
+some other process subscribes to it, so an unwatched camera costs nothing. A process
+subscribes only to the topics its nodes read (:meth:`ZenohTransport.want`: a subscription,
+a latched declaration, a ``latest()``), or to all of them while something holds
+:meth:`ZenohTransport.want_all` (a recorder, a Foxglove viewer): a topic nobody reads in
+another process is never encoded, sent or decoded. Wanting a latched topic also asks the
+other processes for its last value (``last/<name>``), so a process that starts late or
+restarts sees the e-stop, the map and the health at once. Remote publications arrive on
+Zenoh's thread, are decoded there and handed to the bus, which delivers them on its loop.
+Publishers send only to remote subscribers and subscribers take only remote samples
+(Zenoh's locality), so a process never hears itself.
 
 Queryables answer tools without a subscription: ``info/<zid>`` (topics, types, counts),
 ``last/<name>`` (the last message published here) and ``pub/<name>`` (an operator's
@@ -41,6 +47,15 @@ from sage_robot.core.transport.services import Call, ZenohServices
 
 _log = logging.getLogger("sage.bus.zenoh")
 
+LAST_TIMEOUT_S = 2.0  # how long a late joiner's question for a latched topic's last value stays open
+
+
+def _direct(callback: Callable[[Any], None]) -> Any:
+    """Run ``callback`` on Zenoh's network thread rather than on a Python thread of its own
+    (zenoh-python's default): one thread hand-off less per sample. The callbacks only decode
+    and queue the message for the bus's loop."""
+    return zenoh.handlers.Callback(callback, indirect=False)
+
 
 class ZenohTransport(Transport):
     """Publications go to Zenoh as well; other processes' come back to the bus."""
@@ -60,7 +75,12 @@ class ZenohTransport(Transport):
         self._warned: set[str] = set()  # topics a bad frame came in on
         self._last: dict[str, Any] = {}
         self._counts: dict[str, int] = {}
+        self._received: dict[str, int] = {}  # topic -> messages from other processes
         self._declared: list[Any] = []
+        self._wanted: set[str] = set()  # topics with a subscriber of their own
+        self._fresh: set[str] = set()  # wanted topics a live sample or a last value came in on
+        self._everything: Any = None  # the sage/<robot>/topic/** subscriber while want_all holds
+        self._holds = 0
         self._lock = threading.Lock()  # declarations vs close
         self.sent = 0
         self.received = 0
@@ -73,7 +93,6 @@ class ZenohTransport(Transport):
         remote = zenoh.Locality.REMOTE
         s = self.session
         self._declared += [
-            s.declare_subscriber(kind_key(self.robot, "topic"), self._on_sample, allowed_origin=remote),
             s.declare_queryable(kind_key(self.robot, "info", self.zid), self._on_info, allowed_origin=remote),
             s.declare_queryable(kind_key(self.robot, "last"), self._on_last, allowed_origin=remote),
             s.declare_queryable(kind_key(self.robot, "pub"), self._on_pub, allowed_origin=remote),
@@ -99,6 +118,49 @@ class ZenohTransport(Transport):
             return
         pub.put(frame)
         self.sent += 1
+
+    def want(self, topic: str, latched: bool) -> None:
+        if not TOPIC_NAME.match(topic):
+            return  # it cannot travel: it stays in this process (see _declare_publisher)
+        with self._lock:
+            if self.closed or topic in self._wanted:
+                return
+            self._wanted.add(topic)
+            key = topic_key(self.robot, topic)
+            remote = zenoh.Locality.REMOTE
+            sub = self.session.declare_subscriber(key, _direct(self._on_sample), allowed_origin=remote)
+            self._declared.append(sub)
+            if latched:  # a late joiner: the other processes' last value
+                self.session.get(
+                    kind_key(self.robot, "last", topic[1:]), self._on_last_reply,
+                    allowed_destination=zenoh.Locality.REMOTE, timeout=LAST_TIMEOUT_S,
+                )  # fmt: skip
+
+    def want_all(self) -> Callable[[], None]:
+        with self._lock:
+            if self.closed:
+                return lambda: None
+            self._holds += 1
+            if self._everything is None:
+                self._everything = self.session.declare_subscriber(
+                    kind_key(self.robot, "topic"), _direct(self._on_any_sample),
+                    allowed_origin=zenoh.Locality.REMOTE,
+                )
+        released = False
+
+        def release() -> None:
+            nonlocal released
+            with self._lock:
+                if released or self.closed:
+                    return
+                released = True
+                self._holds -= 1
+                if self._holds == 0 and self._everything is not None:
+                    with contextlib.suppress(zenoh.ZError):
+                        self._everything.undeclare()
+                    self._everything = None
+
+        return release
 
     def offer(self, name: str, call: Call) -> None:
         self.services.offer(name, call)
@@ -126,7 +188,8 @@ class ZenohTransport(Transport):
             self.closed = True
         self.services.close()
         self.actions.close()
-        for decl in [*self._declared, *self._publishers.values()]:
+        everything = [self._everything] if self._everything is not None else []
+        for decl in [*self._declared, *everything, *self._publishers.values()]:
             with contextlib.suppress(zenoh.ZError):  # the session closed at exit already
                 decl.undeclare()
         self._declared.clear()
@@ -155,12 +218,31 @@ class ZenohTransport(Transport):
         return pub
 
     # ------------------------------------------------------------ from Zenoh's threads
+    def _on_any_sample(self, sample: Any) -> None:
+        topic = topic_of(self.robot, "topic", str(sample.key_expr))
+        if topic is not None and topic not in self._wanted:  # a wanted one comes on its own
+            self._take(topic, sample.payload)
+
     def _on_sample(self, sample: Any) -> None:
         topic = topic_of(self.robot, "topic", str(sample.key_expr))
-        if topic is None or self._deliver is None:
+        if topic is not None:
+            self._fresh.add(topic)
+            self._take(topic, sample.payload)
+
+    def _on_last_reply(self, reply: Any) -> None:
+        if reply.ok is None:
+            return
+        topic = topic_of(self.robot, "last", str(reply.ok.key_expr))
+        if topic is None or topic in self._fresh:  # a live one (or another process's last) came first
+            return
+        self._fresh.add(topic)
+        self._take(topic, reply.ok.payload)
+
+    def _take(self, topic: str, payload: Any) -> None:
+        if self._deliver is None:
             return
         try:
-            msg = wire.decode(sample.payload.to_bytes())
+            msg = wire.decode(payload.to_bytes())
         except wire.WireError as exc:
             self.rejected += 1
             if topic not in self._warned:  # once per topic: a broken peer must not flood the log
@@ -168,13 +250,15 @@ class ZenohTransport(Transport):
                 _log.warning("bad frame on %s dropped (counted from now on): %s", topic, exc)
             return
         self.received += 1
+        self._received[topic] = self._received.get(topic, 0) + 1
         self._deliver(topic, msg)
 
     def _on_info(self, query: Any) -> None:
         counts = dict(self._counts)
         types = {t: type(m).__name__ for t, m in list(self._last.items())}
         topics = {t: {"type": types.get(t, "?"), "published": n} for t, n in sorted(counts.items())}
-        body = {"zid": self.zid, "pid": os.getpid(), "robot": self.robot, "topics": topics}
+        body = {"zid": self.zid, "pid": os.getpid(), "robot": self.robot, "topics": topics,
+                "received": dict(sorted(self._received.items()))}  # fmt: skip
         query.reply(kind_key(self.robot, "info", self.zid), json.dumps(body))
 
     def _on_last(self, query: Any) -> None:

@@ -16,7 +16,8 @@
   (unknown) once a second, so every page, the brain and the watchdog say "unknown".
 - A dedicated RX thread decodes ODOM -> ``/odom``, BATTERY -> ``/battery_state`` (the
   voltage averaged over ``BATTERY_SMOOTHING_TAU_S`` on the node's clock, so the motors'
-  load sag does not swing the percentage) and
+  load sag does not swing the percentage; published at most every
+  :data:`BATTERY_PUBLISH_PERIOD_S`, however often the firmware reports it) and
   (``mcu.imu_enabled``) IMU -> ``/imu/data`` after the start-up bias calibration,
   publishing through ``bus.publish_threadsafe``.
 - Run by the supervisor (:mod:`sage_robot.app.supervisor`, ``sage up``'s default), it
@@ -83,6 +84,7 @@ TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (cl
 LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
 STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
 SIM_RX_POLL_S = 0.005  # on a simulated clock the port is read in the loop this often (clock s)
+BATTERY_PUBLISH_PERIOD_S = 0.2  # /battery_state at most this often (clock s); firmware may send 50 Hz
 RX_JOIN_TIMEOUT_S = 1.0  # the RX thread wakes every READ_TIMEOUT_S, so this is ample
 FROM_MCU = frozenset(t.code for t in proto.FRAME_TYPES.values() if t.direction is proto.Direction.FROM_MCU)
 
@@ -117,6 +119,7 @@ class SerialBridgeNode(Node):
         self._rates: dict[str, float] = {}
         self._rate_base: tuple[float, dict[str, int]] = (self.clock.now(), {})
         self.battery_smoother = VoltageSmoother()
+        self._battery_published_at = -math.inf  # clock s of the last /battery_state
         self.battery_raw_v: float | None = None
         self.calibrator = ImuCalibrator(self.mcu.imu_calibration_s) if self.mcu.imu_enabled else None
         self._moved_logged_at: float | None = None
@@ -354,8 +357,10 @@ class SerialBridgeNode(Node):
         elif kind is proto.BATTERY:
             self.battery_raw_v = frame.values[0]
             smooth = self.battery_smoother.update(frame.values[0], now)
-            msg = battery_from(smooth, self.settings.battery.discharge_curve, now)
-            self.bus.publish_threadsafe(topics.BATTERY, msg)
+            if now - self._battery_published_at >= BATTERY_PUBLISH_PERIOD_S - 1e-9:
+                self._battery_published_at = now
+                msg = battery_from(smooth, self.settings.battery.discharge_curve, now)
+                self.bus.publish_threadsafe(topics.BATTERY, msg)
         elif kind is proto.IMU and self.calibrator is not None:
             self._on_imu(frame.values, now)
 

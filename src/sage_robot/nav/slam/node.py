@@ -40,7 +40,7 @@ from sage_robot.nav.slam.points import Pose, Scan
 from sage_robot.nav.slam.store import save_session
 
 ODOM_HISTORY = 50  # odometry messages kept to interpolate at scan times (1 s at 50 Hz)
-SLAM_PROGRESS = Topic("/slam/progress", SlamProgress)  # latched
+SLAM_PROGRESS = Topic("/slam/progress", SlamProgress, latched=True)
 SLAM_SAVE = "/slam/save"  # service: SaveMapRequest -> SaveMapReply
 OUT_DIR_RESOURCE: ResourceKey[str | Path] = ResourceKey("slam_out_dir")  # where /slam/save writes by default
 # (x, y, theta) of the first scan
