@@ -18,7 +18,7 @@ from typing import Any
 
 from sage_robot.core.errors import SageError
 from sage_robot.core.transport import wire
-from sage_robot.core.transport.keys import kind_key, low_latency_keys, open_session, topic_key
+from sage_robot.core.transport.keys import kind_key, open_session, topic_key
 
 _log = logging.getLogger("sage.process_groups.hub")
 
@@ -36,8 +36,6 @@ class ZenohHub:
             cfg.insert_json5("scouting/multicast/enabled", "false")
             cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
             cfg.insert_json5("connect/endpoints", "[]")
-            for key, value in low_latency_keys(True).items():  # as the groups' sessions (ZenohSettings)
-                cfg.insert_json5(key, json.dumps(value))
         except zenoh.ZError as exc:
             raise SageError(f"process groups: bad endpoint {endpoint!r}: {exc}") from None
         self.session = open_session(cfg, "process groups")

@@ -39,13 +39,6 @@ class ZenohSettings(Section):
     open_timeout_s: float = Field(
         2.0, gt=0, le=60, description="How long a tool waits for the robot to answer (s)."
     )
-    low_latency: bool = Field(
-        True,
-        description="Zenoh's low-latency unicast transport (no transmit queue: a publication "
-        "is written on the publisher's thread; /cmd_vel p99 between processes 1.2-1.3 ms "
-        "instead of 2.2-3.0 ms here). It drops Zenoh's QoS priorities, which SAGE does not "
-        "use; a link to a peer without it falls back to the usual transport.",
-    )
 
 
 class BusSettings(Section):

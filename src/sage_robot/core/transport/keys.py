@@ -80,8 +80,6 @@ def session_config(z: ZenohSettings, listen: list[str] | None, connect: list[str
         keys["listen/endpoints"] = list(z.listen) if listen is None else listen
     if connect is not None or "connect" in explicit:
         keys["connect/endpoints"] = list(z.connect) if connect is None else connect
-    if "low_latency" in explicit:
-        keys.update(low_latency_keys(z.low_latency))
     try:
         cfg = zenoh.Config.from_file(z.config_file) if z.config_file else zenoh.Config()
         for key, value in keys.items():
@@ -89,11 +87,6 @@ def session_config(z: ZenohSettings, listen: list[str] | None, connect: list[str
     except (zenoh.ZError, OSError) as exc:
         raise ConfigError(f"bus.zenoh: {_one_line(exc)}") from None
     return cfg
-
-
-def low_latency_keys(on: bool) -> dict[str, bool]:
-    """Zenoh's keys for its low-latency unicast transport (it needs QoS off, both ends)."""
-    return {"transport/unicast/lowlatency": on, "transport/unicast/qos/enabled": not on}
 
 
 def open_session(cfg: Any, what: str) -> Any:
