@@ -3,11 +3,12 @@ import asyncio
 import numpy as np
 import pytest
 
+from sage_robot.core import topics
 from sage_robot.core.actions import ActionAborted, GoalStatus
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.errors import ServiceError, ServiceTimeout, ServiceUnavailable
-from sage_robot.core.msgs import OccupancyGrid, Pose2D, Twist
+from sage_robot.core.msgs import EStopState, OccupancyGrid, Pose2D, Text, Twist
 
 
 async def test_topic_keeps_order_per_subscriber():
@@ -132,3 +133,31 @@ async def test_action_cancel_preempt_and_abort():
     aborted = await (await bus.actions.send_goal("refuse", 0)).result()
     assert aborted.status is GoalStatus.ABORTED
     assert "clean room is blocked" in aborted.message
+
+
+async def test_the_transport_is_asked_for_a_topic_while_someone_here_reads_it():
+    from sage_robot.core.bus import LocalTransport
+
+    class Recording(LocalTransport):
+        def __init__(self) -> None:
+            self.calls: list[tuple[str, str]] = []
+
+        def want(self, topic: str, latched: bool) -> None:
+            self.calls.append(("want", topic))
+
+        def unwant(self, topic: str) -> None:
+            self.calls.append(("unwant", topic))
+
+    transport = Recording()
+    bus = Bus(SimClock(), transport)
+    a = bus.subscribe("/a", Text)
+    b = bus.subscribe("/a", Text)
+    a.close()
+    assert transport.calls == [("want", "/a")]  # b still reads it
+    b.close()
+    b.close()  # a second close changes nothing
+    assert transport.calls == [("want", "/a"), ("unwant", "/a")]
+    bus.declare(topics.ESTOP)  # latched in its declaration: read for good
+    bus.subscribe(topics.ESTOP, EStopState).close()
+    assert transport.calls[-1] == ("want", topics.ESTOP)
+    assert not bus.has_readers("/a")

@@ -96,10 +96,17 @@ class Transport(ABC):
         """A node here reads ``topic`` (asked once per topic): deliver other processes'
         publications on it from now on; for a latched topic, also the last one already made."""
 
+    def unwant(self, topic: str) -> None:  # noqa: B027 - optional hook
+        """Nobody here reads ``topic`` any more."""
+
     def want_all(self) -> Callable[[], None]:
         """Deliver every topic until the returned function is called (a recorder, a live
         view). Holds nest."""
         return lambda: None
+
+    def matched(self, topic: str) -> bool:
+        """Whether another process reads ``topic`` now; the default knows none."""
+        return False
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release sockets; the default transport has none."""
@@ -194,6 +201,7 @@ class Subscription(Generic[M]):
         self.closed = True
         if self in self.topic.subscribers:
             self.topic.subscribers.remove(self)
+            self.bus._unwant(self.topic.name)
         self._event.set()
         if self._task is not None:
             self._task.cancel()
@@ -239,7 +247,8 @@ class Bus:
         self._topics: dict[str, TopicInfo] = {}
         self._services: dict[str, ServiceInfo] = {}
         self._taps: list[Callable[[str, Any], None]] = []
-        self._wanted: set[str] = set()  # topics asked of the transport
+        self._interest: dict[str, int] = {}  # topic -> readers here (asked of the transport while > 0)
+        self._held: set[str] = set()  # topics read for good: latched declarations, latest(), want()
         self._inbox: deque[tuple[str, Any]] = deque()  # remote messages on their way to the loop
         self._inbox_lock = threading.Lock()
         self._drain_due = False
@@ -276,7 +285,7 @@ class Bus:
             raise TypeError(f"topic {name} carries {info.msg_type.__name__}, not {msg_type.__name__}")
         info.latched = info.latched or latched
         if latched:
-            self._want(name, True)
+            self._hold(name, True)
         return info
 
     def _info(self, name: str, msg: Any) -> TopicInfo:
@@ -393,9 +402,9 @@ class Bus:
         """Subscribe to a topic. With a callback, a task calls it for each message."""
         info = self.declare(name, msg_type)
         self._bind_loop()
-        self._want(name, info.latched)
         sub: Subscription[M] = Subscription(self, info, maxsize)
         info.subscribers.append(sub)
+        self._want(name, info.latched)  # until the subscription closes
         if info.latched and info.last is not None:
             sub._push(info.last)
         if callback is not None:
@@ -410,14 +419,14 @@ class Bus:
         """The last value of a latched topic, or None. (In a process that did not declare the
         topic before, other processes' values come in from this first read on.)"""
         info = self._topics.get(name)
-        self._want(name, bool(info and info.latched))
+        self._hold(name, bool(info and info.latched))
         return info.last if info else None
 
     def want(self, name: str) -> None:
         """Have other processes' publications on ``name`` delivered here, for a tap (a
         subscription, a latched declaration or :meth:`latest` ask for theirs already)."""
         info = self._topics.get(name)
-        self._want(name, bool(info and info.latched) or bool(isinstance(name, Topic) and name.latched))
+        self._hold(name, bool(info and info.latched) or bool(isinstance(name, Topic) and name.latched))
 
     def want_all(self) -> Callable[[], None]:
         """Have other processes' publications on every topic delivered here (a recorder or a
@@ -425,11 +434,29 @@ class Bus:
         self._bind_loop()  # where they will be delivered
         return self.transport.want_all()
 
+    def has_readers(self, name: str) -> bool:
+        """Whether anyone reads ``name``: a subscriber here, or another process."""
+        info = self._topics.get(name)
+        return bool(info and info.subscribers) or self.transport.matched(name)
+
+    def _hold(self, name: str, latched: bool) -> None:
+        if name not in self._held:
+            self._held.add(name)
+            self._want(name, latched)
+
     def _want(self, name: str, latched: bool) -> None:
         self._bind_loop()
-        if name not in self._wanted:
-            self._wanted.add(name)
+        n = self._interest.get(name, 0) + 1
+        self._interest[name] = n
+        if n == 1:
             self.transport.want(name, latched)
+
+    def _unwant(self, name: str) -> None:
+        n = self._interest.get(name, 0) - 1
+        if n > 0:
+            self._interest[name] = n
+        elif self._interest.pop(name, None) is not None:
+            self.transport.unwant(name)
 
     def topics(self) -> dict[str, TopicInfo]:
         return dict(self._topics)

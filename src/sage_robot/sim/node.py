@@ -187,8 +187,7 @@ class WorldNode(Node):
                 self.frames += 1
 
     def _camera_watched(self) -> bool:
-        info = self.bus.topics().get(topics.CAMERA)
-        return info is not None and bool(info.subscribers)
+        return self.bus.has_readers(topics.CAMERA)  # a page here or in the web's process
 
     def _apply_battery(self) -> None:
         """The scenario's initial charge, set once on the firmware model's battery (its

@@ -128,6 +128,8 @@ class Hub:
         self.counts = {"frames_in": 0, "events_in": 0}
         self.camera_sub: Subscription[CompressedImage] | None = None  # only while someone watches
         self.camera_viewers = 0
+        self._live: list[Subscription[Any]] = []  # the drawn-only streams, while a page is open
+        self._started = False
         self.nav = NavTracker(self)
         self.captions: deque[dict[str, Any]] = deque(maxlen=CAPTIONS_KEPT)
         self._caption_seq = 0
@@ -137,14 +139,13 @@ class Hub:
         self._talk_turns = 0  # /talk turns on their way (from the upload to the reply)
 
     def start(self) -> None:
+        self._started = True
         sub = self.node.subscribe
         sub(topics.BATTERY, BatteryState, self._on_battery)
         sub(topics.UI_STATE, UiState, self._on_ui_state, maxsize=50)
-        sub(topics.DOA, Doa, self._on_doa)
         sub(topics.ODOM, Odometry, self._on_odom)
         sub(topics.AMCL_POSE, PoseWithCovariance, self._on_amcl)
         sub(topics.MAP_ODOM, PoseStamped, self._on_map_odom)
-        sub(topics.SCAN, LaserScan, self._on_scan, maxsize=2)
         sub(topics.PLAN, Path, self._on_plan)
         sub(topics.GOAL_POSE, PoseStamped, self._on_goal)
         sub(topics.MAP, OccupancyGrid, self._on_map, maxsize=2)
@@ -153,16 +154,36 @@ class Hub:
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
         sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
         sub(topics.AUDIO_OUT, AudioChunk, self._on_audio, maxsize=50)
-        sub(topics.SIM_PEOPLE, People, self._on_people)  # published only by the simulator
         sub(topics.HEARD, Text, lambda m: self.caption("visitor", m.data, "microphone"), maxsize=20)
         sub(topics.SAY, Text, lambda m: self.caption("robot", m.data, "announcement"), maxsize=20)
         sub(topics.TOUR_STATE, TourState, lambda m: self.set("tour", tour_json(m)))  # the visitor's tour
         self.set("estop", {"type": "estop", "engaged": False})
+        self._live_views()  # pages that connected before the start
 
     def stop(self) -> None:
         if self.camera_sub is not None:
             self.camera_sub.close()
             self.camera_sub = None
+        self.listeners.clear()
+        self._live_views()
+
+    def _live_views(self) -> None:
+        """The lidar's points, the simulated people and the speaker's direction are only drawn:
+        subscribed while some page is open. At rest nobody converts them, and when the pages
+        run in a process of their own nothing is even sent to it."""
+        if self.listeners and not self._live and self._started:
+            sub = self.bus.subscribe
+            self._live = [
+                sub(topics.SCAN, LaserScan, self._on_scan, maxsize=2),
+                sub(topics.SIM_PEOPLE, People, self._on_people),  # published only by the simulator
+                sub(topics.DOA, Doa, self._on_doa),
+            ]
+        elif not self.listeners and self._live:
+            for live in self._live:
+                live.close()
+            self._live = []
+            for channel in ("scan", "people", "doa"):  # stale by the next page
+                self.latest.pop(channel, None)
 
     # ------------------------------------------------------------ fan-out
     def set(self, channel: str, message: dict[str, Any]) -> None:
@@ -185,12 +206,14 @@ class Hub:
             listener.events.extend(self.events)
         listener.wake.set()
         self.listeners.add(listener)
+        self._live_views()
         return listener
 
     def unlisten(self, listener: Listener) -> None:
         if listener in self.listeners and "camera" in listener.channels:
             self._camera_viewer(-1)
         self.listeners.discard(listener)
+        self._live_views()
 
     def _camera_viewer(self, delta: int) -> None:
         """Subscribe to the camera only while a page shows it: the simulator renders frames

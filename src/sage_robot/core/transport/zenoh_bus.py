@@ -77,7 +77,7 @@ class ZenohTransport(Transport):
         self._counts: dict[str, int] = {}
         self._received: dict[str, int] = {}  # topic -> messages from other processes
         self._declared: list[Any] = []
-        self._wanted: set[str] = set()  # topics with a subscriber of their own
+        self._wanted: dict[str, Any] = {}  # topic -> its Zenoh subscriber (while read here)
         self._fresh: set[str] = set()  # wanted topics a live sample or a last value came in on
         self._everything: Any = None  # the sage/<robot>/topic/** subscriber while want_all holds
         self._holds = 0
@@ -125,16 +125,22 @@ class ZenohTransport(Transport):
         with self._lock:
             if self.closed or topic in self._wanted:
                 return
-            self._wanted.add(topic)
             key = topic_key(self.robot, topic)
-            remote = zenoh.Locality.REMOTE
-            sub = self.session.declare_subscriber(key, _direct(self._on_sample), allowed_origin=remote)
-            self._declared.append(sub)
+            on_sample, remote = _direct(self._on_sample), zenoh.Locality.REMOTE
+            self._wanted[topic] = self.session.declare_subscriber(key, on_sample, allowed_origin=remote)
             if latched:  # a late joiner: the other processes' last value
                 self.session.get(
                     kind_key(self.robot, "last", topic[1:]), self._on_last_reply,
                     allowed_destination=zenoh.Locality.REMOTE, timeout=LAST_TIMEOUT_S,
                 )  # fmt: skip
+
+    def unwant(self, topic: str) -> None:
+        with self._lock:
+            sub = self._wanted.pop(topic, None)
+            self._fresh.discard(topic)
+            if sub is not None and not self.closed:
+                with contextlib.suppress(zenoh.ZError):
+                    sub.undeclare()
 
     def want_all(self) -> Callable[[], None]:
         with self._lock:
@@ -178,7 +184,10 @@ class ZenohTransport(Transport):
         return self.actions
 
     def matched(self, topic: str) -> bool:
-        """Whether another process subscribes to ``topic`` (known once it was published here)."""
+        """Whether another process subscribes to ``topic`` now (the first question declares the
+        topic's publisher, whose matching status says it)."""
+        if topic not in self._publishers and topic not in self._local_only and not self.closed:
+            self._declare_publisher(topic)
         return bool(self._matched.get(topic))
 
     def close(self) -> None:
@@ -189,10 +198,11 @@ class ZenohTransport(Transport):
         self.services.close()
         self.actions.close()
         everything = [self._everything] if self._everything is not None else []
-        for decl in [*self._declared, *everything, *self._publishers.values()]:
+        for decl in [*self._declared, *everything, *self._wanted.values(), *self._publishers.values()]:
             with contextlib.suppress(zenoh.ZError):  # the session closed at exit already
                 decl.undeclare()
         self._declared.clear()
+        self._wanted.clear()
         self._publishers.clear()
         self.session.close()
 
