@@ -32,12 +32,18 @@ from sage_robot.core import topics
 from sage_robot.core.actions import CANCEL_WAIT_S, GoalTimeout
 from sage_robot.core.log import get_logger
 from sage_robot.core.msgs import EStopState, Event, Twist
+from sage_robot.core.msgs.nav import NavState
 from sage_robot.core.node import Node
 
 CLIENT_REPEAT_S = 0.1  # the page re-sends a held command this often (s); documented for pages
 DEADMAN_CHECK_S = 0.02  # how often the deadman (and the e-stop hold) looks (s)
 CANCEL_SERVICE_TIMEOUT_S = 1.0  # the e-stop's call of the navigator's cancel service (s)
+ESTOP_RECANCEL_S = 0.5  # while engaged, the cancel service is asked again this often if nav still runs (s)
 NAV_ACTIONS = (topics.NAVIGATE_TO, topics.TOUR)  # what the e-stop cancels
+# the navigator's states while it follows a goal (the e-stop asks it to cancel)
+GOAL_STATES = frozenset(
+    {NavState.PLANNING, NavState.DRIVING, NavState.WAITING_FOR_PEOPLE, NavState.RECOVERING}
+)
 MAX_CONTROL_INT = 10**6  # a JSON integer beyond this is no speed (and may not fit a float)
 
 _log = get_logger("web")
@@ -77,6 +83,7 @@ class Teleop:
         self.counts = {
             "controls": 0, "deadman_stops": 0, "close_stops": 0, "refused": 0, "estop_cancels": 0,
         }  # fmt: skip
+        self._estop_cancel_at = -math.inf  # time.monotonic() of the hold's last cancel-service call
 
     def start(self) -> None:
         self.bus.declare(topics.ESTOP, EStopState, latched=True)
@@ -128,7 +135,10 @@ class Teleop:
 
     def _hold_estop(self) -> None:
         """While the e-stop is engaged, a goal that anyone starts (the brain, a tour) is cancelled
-        at once: the e-stop stops every motion, not only the operator's."""
+        at once: the e-stop stops every motion, not only the operator's. A goal this process
+        cannot see (sent from another process to the navigator in a third) shows on the
+        navigator's latched state: the navigator's cancel service is asked again while it
+        says it drives."""
         for action in NAV_ACTIONS:
             active = self.bus.actions.active(action)
             if active is not None and not active.cancel_requested:
@@ -137,6 +147,18 @@ class Teleop:
                 active.request_cancel()
         if self.command != (0.0, 0.0):
             self._publish(0.0, 0.0)
+        nav = self.bus.latest(topics.NAV_STATE)
+        now = time.monotonic()
+        if (
+            nav is not None
+            and nav.state in GOAL_STATES
+            and now - self._estop_cancel_at >= ESTOP_RECANCEL_S
+            and self.bus.has_service(topics.CANCEL_NAV)
+        ):
+            self._estop_cancel_at = now
+            self.counts["estop_cancels"] += 1
+            _log.warning("navigator busy during e-stop: cancelling", state=nav.state.value)
+            self.node.spawn(self._call_cancel_service(), "web.cancel_nav")
 
     def request_cancel_navigation(self) -> None:
         """Ask every navigation goal to stop (no waiting), and the navigator's cancel service
