@@ -125,10 +125,8 @@ async def test_recorder_node_records_bus_traffic(tmp_path):
     assert "/not_recorded" not in topics
 
 
-async def test_foxglove_server_advertises_live_topics():
-    import websockets
-    from websockets.typing import Subprotocol
-
+async def _foxglove_node() -> tuple[Bus, FoxgloveNode]:
+    """A Foxglove node on a bus of its own, listening on a free loopback port."""
     clock = SimClock()
     bus = Bus(clock)
     ctx = NodeContext(
@@ -136,11 +134,22 @@ async def test_foxglove_server_advertises_live_topics():
     )
     node = FoxgloveNode(ctx)
     await node.setup()
+    return bus, node
+
+
+def _foxglove_viewer(node: FoxgloveNode) -> Any:
+    import websockets
+    from websockets.typing import Subprotocol
+
+    protocols = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
+    return websockets.connect(f"ws://127.0.0.1:{node.port}", subprotocols=protocols)
+
+
+async def test_foxglove_server_advertises_live_topics():
+    bus, node = await _foxglove_node()
     try:
         bus.publish("/odom", Odometry(0.0, Pose2D(1, 2, 0), Twist()))
-        url = f"ws://127.0.0.1:{node.port}"
-        protocols = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
-        async with websockets.connect(url, subprotocols=protocols) as ws:
+        async with _foxglove_viewer(node) as ws:
             seen: dict[str, dict[str, Any]] = {}
             for _ in range(20):  # bounded: serverInfo, advertise, ...
                 raw = await asyncio.wait_for(ws.recv(), 5)
@@ -159,22 +168,11 @@ async def test_foxglove_server_advertises_live_topics():
 
 
 async def test_foxglove_converts_a_topic_only_for_a_viewer_who_subscribed_and_wants_all_while_watched():
-    import websockets
-    from websockets.typing import Subprotocol
-
-    clock = SimClock()
-    bus = Bus(clock)
-    ctx = NodeContext(
-        bus, clock, load_profile(None, {"ops": {"foxglove_host": "127.0.0.1", "foxglove_port": 0}})
-    )
-    node = FoxgloveNode(ctx)
-    await node.setup()
+    bus, node = await _foxglove_node()
     try:
         bus.publish("/odom", Odometry(0.0, Pose2D(1, 2, 0), Twist()))  # advertises the channel
         assert node._release_all is None  # nobody watches: other processes' topics stay away
-        url = f"ws://127.0.0.1:{node.port}"
-        protocols = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
-        async with websockets.connect(url, subprotocols=protocols) as ws:
+        async with _foxglove_viewer(node) as ws:
             channels: dict[str, int] = {}
             for _ in range(20):  # bounded: serverInfo, advertise, ...
                 raw = await asyncio.wait_for(ws.recv(), 5)
