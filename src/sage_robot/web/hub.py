@@ -143,13 +143,16 @@ class Hub:
         sub = self.node.subscribe
         sub(topics.BATTERY, BatteryState, self._on_battery)
         sub(topics.UI_STATE, UiState, self._on_ui_state, maxsize=50)
+        sub(topics.ODOM, Odometry, self._on_odom)
         sub(topics.AMCL_POSE, PoseWithCovariance, self._on_amcl)
+        sub(topics.MAP_ODOM, PoseStamped, self._on_map_odom)
         sub(topics.PLAN, Path, self._on_plan)
         sub(topics.GOAL_POSE, PoseStamped, self._on_goal)
         sub(topics.MAP, OccupancyGrid, self._on_map, maxsize=2)
         sub(topics.COSTMAP, OccupancyGrid, lambda m: self.set("costmap", costmap_json(m)), maxsize=1)
         self.nav.start()
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
+        sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
         sub(topics.AUDIO_OUT, AudioChunk, self._on_audio, maxsize=50)
         sub(topics.HEARD, Text, lambda m: self.caption("visitor", m.data, "microphone"), maxsize=20)
         sub(topics.SAY, Text, lambda m: self.caption("robot", m.data, "announcement"), maxsize=20)
@@ -165,17 +168,12 @@ class Hub:
         self._live_views()
 
     def _live_views(self) -> None:
-        """The fast streams only pages show (odometry at 50 Hz, the lidar's points, the
-        simulated people, the speaker's direction, localization's score) are subscribed while
-        some page is open. At rest nobody converts them, and when the pages run in a process
-        of their own nothing is even sent to it. Without a page the robot's pose still
-        follows localization (``/amcl_pose``) for the HTTP API."""
+        """The lidar's points, the simulated people and the speaker's direction are only drawn:
+        subscribed while some page is open. At rest nobody converts them, and when the pages
+        run in a process of their own nothing is even sent to it."""
         if self.listeners and not self._live and self._started:
             sub = self.bus.subscribe
             self._live = [
-                sub(topics.ODOM, Odometry, self._on_odom),
-                sub(topics.MAP_ODOM, PoseStamped, self._on_map_odom),
-                sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc),
                 sub(topics.SCAN, LaserScan, self._on_scan, maxsize=2),
                 sub(topics.SIM_PEOPLE, People, self._on_people),  # published only by the simulator
                 sub(topics.DOA, Doa, self._on_doa),
@@ -184,7 +182,7 @@ class Hub:
             for live in self._live:
                 live.close()
             self._live = []
-            for channel in ("scan", "people", "doa", "odom", "loc"):  # stale by the next page
+            for channel in ("scan", "people", "doa"):  # stale by the next page
                 self.latest.pop(channel, None)
 
     # ------------------------------------------------------------ fan-out
