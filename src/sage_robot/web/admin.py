@@ -30,6 +30,7 @@ PLACE_NAME = re.compile(r"^[A-Z0-9][A-Z0-9_]{0,47}$")  # the seed's waypoint nam
 MAX_TEXT = 500  # characters of a description
 MAX_ALIASES = 10
 LOG_LIMIT_MAX = 500
+FRESH_ODOM_WAIT_S = 1.0  # "place at the robot" with no page open: the wait for one odometry message
 PLACES_CHANGED = "places_changed"  # Event kind published after the waypoints file is rewritten
 
 _log = get_logger("web")
@@ -76,7 +77,7 @@ async def add_place(request: Request) -> dict[str, Any]:
         raise HTTPException(
             status_code=422, detail="name: use capitals, digits and _ (like CLEAN_ROOM), up to 48"
         )
-    pose = _robot_pose(st) if body.get("at_robot") is True else _pose(body)
+    pose = await _robot_pose(st) if body.get("at_robot") is True else _pose(body)
     place = Place(name.strip(), pose, _text(body, "description"), _aliases(body))
     path = waypoints_yaml(st.node.settings)
     where = waypoints_info(st.node.settings)
@@ -139,9 +140,9 @@ def _place_json(p: Place) -> dict[str, Any]:
     return _place_dict(p.name, p.pose, p.description, p.aliases)
 
 
-def _robot_pose(st: WebState) -> Pose2D:
-    pose = st.hub.robot_pose
-    if pose is None or st.hub.robot_frame != "map":
+async def _robot_pose(st: WebState) -> Pose2D:
+    pose, frame = await st.hub.current_pose(FRESH_ODOM_WAIT_S)
+    if pose is None or frame != "map":
         raise HTTPException(
             status_code=409,
             detail="the robot is not localized on the map yet; click the map to give x, y instead",

@@ -76,6 +76,8 @@ MIN_INTERVAL_S: dict[str, float] = {
     "social": 0.0,
     "camera": 1.0 / 15.0,  # frames/s cap per client; web.camera_fps overrides
 }
+# channels of the page-only streams (see Hub._live_views), dropped when the last page leaves
+PAGE_ONLY_CHANNELS = ("odom", "pose", "loc", "scan", "people", "doa")
 EVENTS_KEPT = 50  # recent events shown on a newly opened page
 # the navigator's social events (issue #20), also shown on the kiosk face ("social" channel)
 SOCIAL_EVENT_KINDS = frozenset({"slowing_for_people", "pulling_over", "passing_group", "blocked_by_people"})
@@ -143,7 +145,6 @@ class Hub:
         sub = self.node.subscribe
         sub(topics.BATTERY, BatteryState, self._on_battery)
         sub(topics.UI_STATE, UiState, self._on_ui_state, maxsize=50)
-        sub(topics.ODOM, Odometry, self._on_odom)
         sub(topics.AMCL_POSE, PoseWithCovariance, self._on_amcl)
         sub(topics.MAP_ODOM, PoseStamped, self._on_map_odom)
         sub(topics.PLAN, Path, self._on_plan)
@@ -152,7 +153,6 @@ class Hub:
         sub(topics.COSTMAP, OccupancyGrid, lambda m: self.set("costmap", costmap_json(m)), maxsize=1)
         self.nav.start()
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
-        sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc)
         sub(topics.AUDIO_OUT, AudioChunk, self._on_audio, maxsize=50)
         sub(topics.HEARD, Text, lambda m: self.caption("visitor", m.data, "microphone"), maxsize=20)
         sub(topics.SAY, Text, lambda m: self.caption("robot", m.data, "announcement"), maxsize=20)
@@ -168,12 +168,17 @@ class Hub:
         self._live_views()
 
     def _live_views(self) -> None:
-        """The lidar's points, the simulated people and the speaker's direction are only drawn:
-        subscribed while some page is open. At rest nobody converts them, and when the pages
-        run in a process of their own nothing is even sent to it."""
+        """The fast streams only pages show (odometry at 50 Hz, localization's score, the
+        lidar's points, the simulated people, the speaker's direction) are subscribed while
+        some page is open. At rest nobody converts them, and when the pages run in a process
+        of their own nothing is even sent to it. The map->odom correction stays subscribed,
+        so the first odometry a new page brings is placed on the map at once; without a page
+        the pose follows ``/amcl_pose``, and :meth:`current_pose` fetches a fresh one."""
         if self.listeners and not self._live and self._started:
             sub = self.bus.subscribe
             self._live = [
+                sub(topics.ODOM, Odometry, self._on_odom),
+                sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc),
                 sub(topics.SCAN, LaserScan, self._on_scan, maxsize=2),
                 sub(topics.SIM_PEOPLE, People, self._on_people),  # published only by the simulator
                 sub(topics.DOA, Doa, self._on_doa),
@@ -182,8 +187,33 @@ class Hub:
             for live in self._live:
                 live.close()
             self._live = []
-            for channel in ("scan", "people", "doa"):  # stale by the next page
+            for channel in PAGE_ONLY_CHANNELS:  # stale by the next page
                 self.latest.pop(channel, None)
+            self._odom = None
+            self.robot_pose, self.robot_frame = None, ""  # /amcl_pose sets it again
+
+    async def current_pose(self, timeout_s: float) -> tuple[tuple[float, float, float] | None, str]:
+        """The robot's pose now and its frame: what the pages see while one is open, else
+        from one fresh odometry message (waited for at most ``timeout_s``) on the last
+        map->odom correction; without odometry, the last ``/amcl_pose`` (``None`` if none)."""
+        if self._live:
+            return self.robot_pose, self.robot_frame
+        fresh: asyncio.Future[Odometry] = asyncio.get_running_loop().create_future()
+
+        def take(msg: Odometry) -> None:
+            if not fresh.done():
+                fresh.set_result(msg)
+
+        sub = self.bus.subscribe(topics.ODOM, Odometry, take)
+        try:
+            msg = await asyncio.wait_for(fresh, timeout_s)
+        except asyncio.TimeoutError:  # no odometry: what localization said last (or nothing)
+            return self.robot_pose, self.robot_frame
+        finally:
+            sub.close()
+        if self._map_odom is None:
+            return msg.pose.as_tuple(), msg.frame_id
+        return compose(self._map_odom, msg.pose.as_tuple()), "map"
 
     # ------------------------------------------------------------ fan-out
     def set(self, channel: str, message: dict[str, Any]) -> None:
