@@ -137,6 +137,12 @@ async def _crash_and_recover(sup: GroupSupervisor, odom: list[Odometry], events:
     # messages the supervisor has yet to take).
     assert 0.5 < report.stamp <= sup.sim_time + CLOCK_SLACK_S
     assert 0.0 < odom[-1].stamp <= sup.sim_time + CLOCK_SLACK_S
+    # The bridge reads the simulator's pty from another process, whenever it runs: the
+    # simulator must not wait for its bytes in lockstep (each wait held it up for 1 s).
+    assert g["sim"].report is not None
+    mcu = {n.name: n for n in g["sim"].report.nodes}["mcu_sim"].stats
+    assert mcu["lockstep"] is False
+    assert mcu["lockstep_timeouts"] == 0
 
     pids = {name: p.pid for name, p in g.items()}
     os.kill(pids["aux"], signal.SIGKILL)

@@ -6,7 +6,8 @@ group of the profile's ``processes.groups``::
     python -m sage_robot.app.group_main --group nav --mode sim --nodes map_server,navigator \\
         --connect tcp/127.0.0.1:7447 --clock follow
 
-Its bus is a Zenoh client of the supervisor's router (``--connect``). ``--clock source`` (the
+Its bus is a Zenoh peer that finds the others at the supervisor's router (``--connect``) and
+then talks to each directly. ``--clock source`` (the
 simulator's group) steps a simulated clock and publishes ``/clock``; ``--clock follow`` takes
 time from ``/clock`` (:class:`~sage_robot.core.clock_follow.FollowerClock`); ``--clock wall``
 is the real robot's time. The group's launcher reports on ``/sage/group_health/<group>``;
@@ -43,7 +44,7 @@ from sage_robot.core.config import Settings, load_profile
 from sage_robot.core.errors import ConfigError, SageError
 from sage_robot.core.msgs import HealthReport
 from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
-from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
+from sage_robot.hardware.mcu.bridge import PORT_READ_ELSEWHERE, PORT_RESOURCE
 
 GROUP_HEALTH_PREFIX = "/sage/group_health/"  # + group name: a group's launcher reports here
 PORT_WATCH_S = 0.1  # how often the simulator's group checks its pty link (s, its clock)
@@ -52,13 +53,19 @@ STDIN_FD = 0  # --parent-pipe: the supervisor holds the other end of stdin
 STDIN_READ_BYTES = 4096  # nothing is ever written there: one read sees the end
 
 
+GROUP_LISTEN = "tcp/127.0.0.1:0"  # a group's own endpoint: loopback, a port the system picks
+
+
 def group_health_topic(group: str) -> Topic[HealthReport]:
     return Topic(f"{GROUP_HEALTH_PREFIX}{group}", HealthReport)
 
 
 def group_settings(profile: str | None, overrides: dict[str, Any], connect: str) -> Settings:
-    """The profile with ``overrides`` and the bus as a Zenoh client of ``connect``."""
-    bus = {"transport": "zenoh", "zenoh": {"mode": "client", "listen": [], "connect": [connect]}}
+    """The profile with ``overrides`` and the bus as a Zenoh peer that meets the others at the
+    router ``connect``: it listens on a free loopback port, and the router's gossip tells the
+    other groups where, so messages between two groups go straight from one to the other
+    (one hop, not two through the router)."""
+    bus = {"transport": "zenoh", "zenoh": {"mode": "peer", "listen": [GROUP_LISTEN], "connect": [connect]}}
     merged = dict(overrides)
     merged["bus"] = {**merged.get("bus", {}), **bus}
     return load_profile(profile, merged)
@@ -167,6 +174,8 @@ def build_context(args: argparse.Namespace) -> tuple[NodeContext, list[NodeSpec]
     ctx.bus.declare(topics.HEALTH, latched=True)  # the supervisor's merged report (the pages read it)
     if args.mcu_port:
         ctx.resources[PORT_RESOURCE] = args.mcu_port
+    if args.export_port:  # the motion group's bridge reads the simulator's pty
+        ctx.resources[PORT_READ_ELSEWHERE] = True
     return ctx, specs
 
 

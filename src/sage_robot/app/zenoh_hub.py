@@ -1,10 +1,11 @@
 """The process groups' meeting point: a Zenoh router in the supervisor's process.
 
-Every group's bus is a Zenoh client of this router (explicit loopback endpoint, no
-scouting), so the groups reach each other, and tools (``sage topic``, ``sage status``) reach
-the robot, at one address. The supervisor uses the same session for the few topics it reads
-(each group's health, ``/clock``) and writes (the merged ``/sage/health``, a stop on
-``/cmd_vel`` when a critical group dies), with the bus's wire encoding.
+Every group's bus is a Zenoh peer that connects to this router (explicit loopback endpoint,
+no scouting) and learns the other groups' endpoints from its gossip, so two groups talk
+directly; tools (``sage topic``, ``sage status``) reach the robot at this one address. The
+supervisor uses the same session for the few topics it reads (each group's health,
+``/clock``) and writes (the merged ``/sage/health``, a stop on ``/cmd_vel`` when a critical
+group dies), with the bus's wire encoding.
 """
 
 from __future__ import annotations

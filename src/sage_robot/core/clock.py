@@ -54,6 +54,9 @@ class Clock(ABC):
     """A source of time and of sleeps."""
 
     is_simulated: bool = False
+    # Whether this process steps time itself, so that what happens at a simulated time
+    # never depends on the machine's load (a SimClock; not a clock that follows /clock).
+    is_lockstep: bool = False
 
     @abstractmethod
     def now(self) -> float:
@@ -121,6 +124,7 @@ class SimClock(Clock):
     """
 
     is_simulated = True
+    is_lockstep = True
 
     def __init__(self, start: float = 0.0) -> None:
         self._now = start

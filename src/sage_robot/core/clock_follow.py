@@ -46,6 +46,8 @@ class FollowerClock(SimClock):
     Offloaded jobs run as on a simulated clock that nobody drives: a job with ``latency_s``
     hands its result over once the time passes its due time."""
 
+    is_lockstep = False  # time comes from another process, paced by the wall clock
+
     def __init__(self, start: float = 0.0) -> None:
         super().__init__(start)
         self.ticks = 0  # /clock messages taken

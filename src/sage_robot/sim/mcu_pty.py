@@ -33,7 +33,7 @@ import numpy as np
 
 from sage_robot.core.node import SIM_STEP_HOOKS, Node
 from sage_robot.core.resources import ResourceKey
-from sage_robot.hardware.mcu.bridge import PORT_RESOURCE, TX_COUNT_RESOURCE, TxCount
+from sage_robot.hardware.mcu.bridge import PORT_READ_ELSEWHERE, PORT_RESOURCE, TX_COUNT_RESOURCE, TxCount
 from sage_robot.sim.firmware import FirmwareModel, SimFirmware, make_firmware
 from sage_robot.sim.flat_floor import FlatFloor, SimBody
 
@@ -143,6 +143,7 @@ class PtyMcu:
         self.slave_name = ""
         self.bytes_dropped = 0  # bytes the firmware sent while nobody read them
         self.writes = 0  # os.write calls toward the Jetson
+        self.lockstep_timeouts = 0  # lockstep waits that ran out (each held the simulator LOCKSTEP_WAIT_S)
         self._pending = bytearray()  # frames produced, written with the next ODOM
         self._open()
 
@@ -174,6 +175,7 @@ class PtyMcu:
         on_the_way = tx.total - self._rx_total if self.lockstep and tx is not None else 0
         if tx is not None and on_the_way > 0 and not self._wait_readable(on_the_way, self.master_fd):
             self._rx_total = tx.total  # lost on the way (a write that failed half-way)
+            self.lockstep_timeouts += 1
         while True:
             try:
                 data = os.read(self.master_fd, READ_CHUNK)
@@ -197,8 +199,8 @@ class PtyMcu:
                 written = os.write(self.master_fd, out)
             except (BlockingIOError, OSError):  # nobody reads: the buffer is full
                 written = 0
-            if self.lockstep and written:
-                self._wait_readable(before + written)
+            if self.lockstep and written and not self._wait_readable(before + written):
+                self.lockstep_timeouts += 1
             self.bytes_dropped += len(out) - written
             self.writes += 1
 
@@ -275,7 +277,10 @@ class McuSimNode(Node):
             )
         self.floor = FlatFloor(robot.track_width_m)
         tx = self.ctx.resources.setdefault(TX_COUNT_RESOURCE, TxCount())
-        self.pty = PtyMcu(self.firmware, lockstep=self.clock.is_simulated, tx=tx)
+        # Lockstep needs the bridge in this process: one in another process reads whenever it
+        # runs, and waiting for its bytes to be readable here would hold the simulator up.
+        elsewhere = self.ctx.resources.get(PORT_READ_ELSEWHERE, False)
+        self.pty = PtyMcu(self.firmware, lockstep=self.clock.is_lockstep and not elsewhere, tx=tx)
         self.ctx.resources[PORT_RESOURCE] = self.pty.port_name
         self.ctx.resources[MCU_SIM_RESOURCE] = self
         self._hooks = self.ctx.resources.setdefault(SIM_STEP_HOOKS, [])
@@ -314,6 +319,8 @@ class McuSimNode(Node):
             "watchdog_trips": fw.watchdog_trips,
             "pwm_us": list(fw.pwm_us),
             "battery_v": round(fw.battery_voltage, 3),
+            "lockstep": self.pty.lockstep,
+            "lockstep_timeouts": self.pty.lockstep_timeouts,
         }
 
 

@@ -19,7 +19,10 @@
   load sag does not swing the percentage; published at most every
   :data:`BATTERY_PUBLISH_PERIOD_S`, however often the firmware reports it) and
   (``mcu.imu_enabled``) IMU -> ``/imu/data`` after the start-up bias calibration,
-  publishing through ``bus.publish_threadsafe``.
+  publishing through ``bus.publish_threadsafe``. On a simulated clock that follows another
+  process's ``/clock`` the thread only reads: the bytes are decoded and stamped on the loop,
+  whose clock that is. On a lockstep simulated clock there is no thread: the loop reads the
+  port every :data:`SIM_RX_POLL_S`.
 - Run by the supervisor (:mod:`sage_robot.app.supervisor`, ``sage up``'s default), it
   writes a heartbeat byte every ``HEARTBEAT_PERIOD_S`` to the pipe the supervisor gave it;
   when the heartbeat stops (frozen process, stalled loop) the supervisor stops the motors.
@@ -31,11 +34,13 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import math
 import os
 import threading
 from collections import Counter
+from collections.abc import Callable
 from typing import Any
 
 from sage_robot.core import topics
@@ -79,6 +84,9 @@ class TxCount:
 
 
 TX_COUNT_RESOURCE = ResourceKey("mcu_tx_bytes", TxCount)
+# Set where the simulated MCU's pty is read by a bridge in another process (process groups):
+# that bridge reads whenever it runs, so the simulator cannot step in lockstep with it.
+PORT_READ_ELSEWHERE = ResourceKey("mcu_port_read_elsewhere", bool)
 CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
 TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
 LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
@@ -136,7 +144,7 @@ class SerialBridgeNode(Node):
         self.every(CMD_TIMEOUT_CHECK_S, self._check_timeout, "serial_bridge.cmd_timeout")
         self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
         self.spawn(self._link_loop(), "serial_bridge.link")
-        if self.clock.is_simulated:  # no RX thread: reads at fixed simulated times (deterministic)
+        if self.clock.is_lockstep:  # no RX thread: reads at fixed simulated times (deterministic)
             self.every(SIM_RX_POLL_S, self._poll_rx, "serial_bridge.rx")
         self._beat_fd = heartbeat_fd()
         if self._beat_fd is not None:  # run by the supervisor: tell it this bridge is alive
@@ -270,9 +278,18 @@ class SerialBridgeNode(Node):
             self.align.reset()
         self._lost.clear()
         self._rx_stop = threading.Event()
-        if not self.clock.is_simulated:
+        if not self.clock.is_lockstep:  # a real port, or time that follows another process
+            deliver = self._on_bytes
+            if self.clock.is_simulated:  # followed time is the loop's: bytes are decoded (stamped) there
+                loop = asyncio.get_running_loop()
+
+                def deliver(data: bytes) -> None:
+                    with contextlib.suppress(RuntimeError):  # the loop closed: shutting down
+                        loop.call_soon_threadsafe(self._on_bytes, data)
+
+            args = (port, self._rx_stop, deliver)
             self._rx_thread = threading.Thread(
-                target=self._rx_loop, args=(port, self._rx_stop), name="serial_bridge.rx", daemon=True
+                target=self._rx_loop, args=args, name="serial_bridge.rx", daemon=True
             )
             self._rx_thread.start()
         self.log.info("MCU link up", port=path, baud=self.mcu.baud)
@@ -319,18 +336,18 @@ class SerialBridgeNode(Node):
             self._port = None
 
     # ------------------------------------------------------------ RX thread
-    def _rx_loop(self, port: Any, stop: threading.Event) -> None:
+    def _rx_loop(self, port: Any, stop: threading.Event, deliver: Callable[[bytes], None]) -> None:
         try:
             while not stop.is_set():
                 data = port.read(port.in_waiting or 1)
                 if data:
-                    self._on_bytes(data)
+                    deliver(data)
         except Exception as exc:  # SerialException/OSError on unplug; anything else too
             if not stop.is_set():
                 self._mark_lost(f"{type(exc).__name__}: {exc}")
 
     def _poll_rx(self) -> None:
-        """Simulated clock: read what the port holds, in the loop (the simulator's pty makes
+        """Lockstep simulated clock: read what the port holds, in the loop (the simulator's pty makes
         every byte of a step readable before the step ends)."""
         port = self._port
         if port is None or self._lost.is_set():
