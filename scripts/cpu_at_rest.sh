@@ -9,11 +9,14 @@ mode=${1:?--one-process or --processes}; warm=${2:-60}; window=${3:-60}
 SAGE_STATE_DIR=$(mktemp -d); SAGE_DATA_DIR=$(mktemp -d)
 export SAGE_STATE_DIR SAGE_DATA_DIR SAGE_OPERATOR_PASSWORD=${SAGE_OPERATOR_PASSWORD:-at-rest}
 log=$(mktemp)
-setsid .venv/bin/sage sim "$mode" >"$log" 2>&1 &
-pid=$!
-trap 'kill -INT -- -$pid 2>/dev/null || true; sleep 5; kill -KILL -- -$pid 2>/dev/null || true' EXIT
-sleep "$warm"
+setsid --fork .venv/bin/sage sim "$mode" >"$log" 2>&1 </dev/null
+sleep 1
+pid=$(pgrep -n -f "sage sim $mode") || { echo "sage sim did not start: $(tail -3 "$log")" >&2; exit 1; }
 sid=$(ps -o sid= -p "$pid" | tr -d ' ')
+# the whole session, whatever happens to this script (a robot left running skews the next run)
+trap 'pkill -INT -s "$sid" 2>/dev/null || true; sleep 5; pkill -KILL -s "$sid" 2>/dev/null || true' EXIT
+sleep "$warm"
+kill -0 "$pid" 2>/dev/null || { echo "sage sim ended early: $(tail -3 "$log")" >&2; exit 1; }
 tree_ticks() {
   local total=0 t
   for p in $(ps -e -o pid=,sid= | awk -v s="$sid" '$2 == s {print $1}'); do
