@@ -52,6 +52,7 @@ STOP_S = 30.0  # bound on the robot stopping after the motion group died (s, wal
 TELEOP_PERIOD_S = 0.1  # the teleop command's period (s)
 DRIVE = Twist(0.2, 0.3)  # m/s, rad/s: a slow circle
 MOVING_MPS = 0.05  # faster than this counts as moving (m/s)
+CRUISING_MPS = 0.9 * DRIVE.linear_x  # teleop's kills wait for this (from rest it is still speeding up)
 POLL_S = 0.02
 RATE_WINDOW_S = 2.0  # the simulation's real-time factor is taken over this much wall time (s)
 STOPPED_MPS = 0.01  # slower than this counts as at rest (m/s)
@@ -316,13 +317,13 @@ def main() -> int:
             results["kills"][-1]["page"] = page_health(f"http://127.0.0.1:{web_port}/api/health", "nav")
         w.teleop.set()
         threading.Thread(target=w.drive, daemon=True).start()
-        wait(lambda: w.truth and w.truth[-1][2] > MOVING_MPS, START_S, "the robot moving")
+        wait(lambda: w.truth and w.truth[-1][2] > CRUISING_MPS, START_S, "the robot at teleop's speed")
         for group in [g for g in args.groups.split(",") if g]:
             results["kills"].append(kill_and_measure(w, group))
             if web is not None:
                 time.sleep(1.5)  # one health period: the page's report is at most this old
                 results["kills"][-1]["page"] = page_health(web, group)
-            wait(lambda: w.truth and w.truth[-1][2] > MOVING_MPS, BACK_S, "the robot moving again")
+            wait(lambda: w.truth and w.truth[-1][2] > CRUISING_MPS, BACK_S, "teleop's speed again")
         w.teleop.clear()
     finally:
         sage.send_signal(signal.SIGINT)

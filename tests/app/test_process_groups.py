@@ -64,6 +64,17 @@ def test_a_simulated_run_without_the_sim_group_is_refused(tmp_path: Path) -> Non
         plan_groups(settings, "sim", [("navigator", True)], "tcp/127.0.0.1:1", str(tmp_path))
 
 
+def test_speech_and_the_brain_run_at_a_lower_cpu_priority_by_default() -> None:
+    settings = load_profile(None, {})
+    nodes = [(n, False) for n in ("sim_world", "mcu_sim", "serial_bridge", "voice", "brain", "kb")]
+    plans = {p.name: p.argv for p in plan_groups(settings, "sim", nodes, "tcp/127.0.0.1:7447", "/tmp")}
+    assert plans["voice"][plans["voice"].index("--nice") + 1] == "5"
+    assert plans["brain"][plans["brain"].index("--nice") + 1] == "5"
+    assert "--nice" not in plans["motion"]
+    with pytest.raises(ValueError, match="nice of group 'voice'"):
+        ProcessSettings(nice={"voice": 40})
+
+
 def test_the_motion_process_imports_no_ml_package() -> None:
     """The motion group's process as group_main builds it: its nodes' classes and its transport."""
     nodes = list(DEFAULT_GROUPS["motion"])
@@ -86,7 +97,7 @@ def test_the_motion_process_imports_no_ml_package() -> None:
 
 def _settings(robot: str, endpoint: str, groups: dict[str, tuple[str, ...]]) -> Any:
     base = load_profile(None, {"bus": {"robot_id": robot, "zenoh": {"listen": [endpoint]}}})
-    return base.model_copy(update={"processes": ProcessSettings(groups=groups)})
+    return base.model_copy(update={"processes": ProcessSettings(groups=groups, nice={"aux": 3})})
 
 
 def test_a_killed_group_comes_back_alone_and_the_others_keep_their_pids(tmp_path: Path) -> None:
@@ -145,6 +156,9 @@ async def _crash_and_recover(sup: GroupSupervisor, odom: list[Odometry], events:
     assert mcu["lockstep_timeouts"] == 0
 
     pids = {name: p.pid for name, p in g.items()}
+    # processes.nice: aux yields the cores to the others (every thread it starts inherits it)
+    assert os.getpriority(os.PRIO_PROCESS, pids["aux"]) == 3
+    assert os.getpriority(os.PRIO_PROCESS, pids["motion"]) == 0
     os.kill(pids["aux"], signal.SIGKILL)
     t0 = time.monotonic()
     await until(lambda: g["aux"].state is NodeState.RUNNING and g["aux"].pid != pids["aux"], "aux back",

@@ -192,6 +192,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--start-time", type=float, default=0.0, help="simulated start time (s)")
     p.add_argument("--export-port", default="", help="keep a link to the simulated MCU's pty here")
     p.add_argument("--mcu-port", default="", help="the serial bridge opens this port")
+    p.add_argument("--nice", type=int, default=0, help="lower this process's CPU priority by this much")
     p.add_argument("--parent-pipe", action="store_true",
                    help="stop when stdin reaches its end (the supervisor is gone)")
     return p.parse_args(argv)
@@ -199,6 +200,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.nice:  # first, so every thread the process starts has it
+        os.nice(args.nice)
     try:
         ctx, specs = build_context(args)
         asyncio.run(run_group(ctx, specs, args.export_port, args.parent_pipe))

@@ -114,6 +114,9 @@ def plan_groups(
         argv = [sys.executable, "-m", "sage_robot.app.group_main", "--group", name, "--mode", mode,
                 "--nodes", ",".join(members), "--connect", endpoint,
                 "--overrides", json.dumps(overrides or {})]
+        nice = settings.processes.nice.get(name, 0)
+        if nice:
+            argv += ["--nice", str(nice)]
         if profile:
             argv += ["--profile", profile]
         clock = "wall"

@@ -34,12 +34,32 @@ DEFAULT_GROUPS: dict[str, tuple[str, ...]] = {
 }
 
 
+# Niceness by group (Linux nice, 0..19): speech and the brain's models (Whisper, Piper, the
+# embeddings; a restart's imports) yield the cores to motion, navigation and the pages when
+# the machine is busy.
+DEFAULT_NICE: dict[str, int] = {"voice": 5, "brain": 5}
+MAX_NICE = 19
+
+
 class ProcessSettings(Section):
     groups: dict[str, tuple[str, ...]] = Field(
         default_factory=lambda: dict(DEFAULT_GROUPS),
         description="Group name -> the nodes that run in that process. A group named "
         f"'{CLOCK_GROUP}' runs the simulator and publishes /clock; the others follow it.",
     )
+    nice: dict[str, int] = Field(
+        default_factory=lambda: dict(DEFAULT_NICE),
+        description="Group name -> how much lower its CPU priority is (Linux nice, 0-19; "
+        "groups not named run at 0). Under load the cores go to the other groups first.",
+    )
+
+    @field_validator("nice")
+    @classmethod
+    def _nice_range(cls, nice: dict[str, int]) -> dict[str, int]:
+        for group, value in nice.items():
+            if not 0 <= value <= MAX_NICE:
+                raise ValueError(f"nice of group {group!r}: {value} is not in 0..{MAX_NICE}")
+        return nice
 
     @field_validator("groups")
     @classmethod
