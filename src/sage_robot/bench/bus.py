@@ -24,6 +24,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--zenoh-scale", type=float, default=1.0, help="scale the Zenoh cases' message counts (e.g. 0.2)"
     )
+    p.add_argument("--at-rest", action="store_true",
+                   help="also the CPU of `sage sim` at rest, one process vs process groups (minutes)")
+    p.add_argument("--rest-warm", type=float, default=50.0, help="--at-rest: warm-up per mode (s)")
+    p.add_argument("--rest-window", type=float, default=60.0, help="--at-rest: measured window per mode (s)")
 
 
 async def _case(make: Any, n_subs: int, n_msgs: int, transport: Any = None) -> dict[str, float]:
@@ -84,6 +88,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {"bench": "bus", "cases": cases}
     if not args.no_zenoh:
         out["zenoh_cases"] = _zenoh_cases(args.zenoh_scale)
+    if args.at_rest:
+        from sage_robot.bench.bus_rest import run_at_rest
+
+        out["at_rest"] = run_at_rest(args.rest_warm, args.rest_window)
     return out
 
 
