@@ -68,6 +68,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="as fast as the machine allows (the result is the same at any speed)")
     p.add_argument("--people-wait", type=float, default=PEOPLE_WAIT_S,
                    help="nav.people_wait_s: how long to wait for people in the way (s)")
+    p.add_argument("--people-model", choices=("auto", "jupedsim", "simple"), default="auto",
+                   help="sim.people_model: JuPedSim's pedestrians (auto: where installed) or simple walkers")
     p.add_argument("--legs-file", default="",
                    help="JSON lines, one per finished leg; a rerun with the same file skips the legs "
                         "it holds (a long --pairs all run can be done in pieces) and sums them all")
@@ -161,7 +163,8 @@ def _settings(args: argparse.Namespace, waypoints: str = "") -> Any:
     return Settings.model_validate({
         "nav": {**base, "initial_place": start, "people_wait_s": args.people_wait},
         "sim": {"world_map": args.map, "speed": None if args.fast else args.speed, "seed": args.seed,
-                "pedestrians": args.pedestrians, "clutter": False, "camera_hz": 0},
+                "pedestrians": args.pedestrians, "clutter": False, "camera_hz": 0,
+                "people_model": args.people_model},
     }), list(places)
 
 
@@ -196,7 +199,7 @@ def _run(args: argparse.Namespace, waypoints: str) -> dict[str, Any]:
     clutter, paths_remain = _clutter(settings, args.clutter, rng, places)
     head = {"bench": "nav", "map": settings.nav.map or "default building", "pedestrians": args.pedestrians,
             "clutter": args.clutter, "seed": args.seed, "speed": None if args.fast else args.speed,
-            "first_leg": args.first_leg}
+            "first_leg": args.first_leg, "people_model": _people_model(args.people_model)}
     if waypoints:
         head["places"] = f"auto {len(places)}"
     extra = {"boxes_placed": len(clutter), "paths_remain": paths_remain}
@@ -223,6 +226,13 @@ def _run(args: argparse.Namespace, waypoints: str) -> dict[str, Any]:
         done += asyncio.run(_drive_all(settings, todo, scenario, world, keep))
     wall_s = round(time.perf_counter() - t0, 1)
     return {**head, **extra, "legs_planned": len(legs), **summarize(done), "wall_s": wall_s}
+
+
+def _people_model(asked: str) -> str:
+    """The pedestrian model that runs: ``auto`` is JuPedSim where it is installed."""
+    from sage_robot.sim.crowd import jupedsim_available
+
+    return "jupedsim" if asked == "jupedsim" or (asked == "auto" and jupedsim_available()) else "simple"
 
 
 def _scenario(clutter: tuple[Any, ...]) -> Any:

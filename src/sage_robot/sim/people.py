@@ -1,5 +1,5 @@
-"""Simulated pedestrians: walkers along corridors, people who stop and stand, small groups,
-and someone who walks up to the robot and stays a while.
+"""Simulated pedestrians: walkers along corridors, people who stop and stand, small groups
+standing or walking together, and someone who walks up to the robot and stays a while.
 
 Pure (numpy + stdlib): every random choice comes from the ``numpy.random.Generator``
 given, so a seed gives the same crowd and the same walk. Map frame, metres, radians.
@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from sage_robot.sim import walking_group
 
 PERSON_RADIUS_M = 0.25  # body circle for collisions and the camera
 LEG_RADIUS_M = 0.07  # each leg, as the lidar sees it at ~0.5 m height
@@ -44,6 +46,8 @@ WALL_MARGIN_M = 0.05  # people keep their body this far clear of walls
 ARRIVE_M = 0.15
 SPAWN_MIN_DIST_M = 5.0  # random people start at least this far from the robot
 EDGE_TRIES = 50
+WAITING_MPS = 0.05  # a person slower than this is standing (a leader does not wait for them)
+WALKING = ("walker", "companion")  # people who step aside from the robot's way and walk around it
 CORRIDOR_HALF_MIN_M = 0.8  # lane edges at least this half-wide are corridors (spurs are narrower)
 
 
@@ -55,7 +59,7 @@ class PersonState:
     x: float
     y: float
     theta: float = 0.0
-    behaviour: str = "walker"  # walker | stander | group | approacher
+    behaviour: str = "walker"  # walker | stander | group | approacher | companion
     speed_mps: float = 1.0  # preferred walking speed
     moving: float = 0.0  # current speed (m/s)
     route: list[tuple[float, float]] = field(default_factory=list)
@@ -72,6 +76,8 @@ class PersonState:
     waited_s: float = 0.0  # walker: how long it has been held up at the robot (s)
     aside: list[tuple[float, float]] = field(default_factory=list)  # asked to make way: going there
     ignores: bool | None = None  # decided at the first "excuse me": stays put when asked
+    leader: int = -1  # companion: the id of the walker it walks with
+    slot: int = 0  # companion: its place in the group (sim/walking_group.py's slots)
 
 
 class Lanes:
@@ -157,6 +163,11 @@ class Crowd:
         self.line_of_sight = line_of_sight  # (x0, y0, x1, y1) -> bool, for the approacher
         self.is_free: Any = None  # (x, y) -> bool: known-free floor (random targets stay on it)
         self.robot_speed = 0.0  # m/s, set by the world each step (the approacher waits for a stop)
+        self._by_id = {p.id: p for p in people}
+        self._companions: dict[int, list[PersonState]] = {}
+        for p in people:
+            if p.behaviour == "companion":
+                self._companions.setdefault(p.leader, []).append(p)
 
     # ---------------------------------------------------------------- geometry
     def bodies(self) -> np.ndarray:
@@ -200,12 +211,16 @@ class Crowd:
             p.aside.pop(0)
         if p.aside:
             return p.aside[0]
+        if p.behaviour == "companion":
+            return self._companion_goal(p)
         if p.behaviour in ("stander", "group"):
             return None
         if p.wait_until > t:
             return None
         if p.behaviour == "approacher":
             return self._approach_goal(p, t, robot)
+        if self._waits_for_companions(p):
+            return None
         while p.route and math.hypot(p.route[0][0] - p.x, p.route[0][1] - p.y) < ARRIVE_M:
             p.route.pop(0)
             if self.rng.random() < STOP_PROBABILITY:
@@ -214,6 +229,33 @@ class Crowd:
         if not p.route:
             self._plan(p)
         return p.route[0] if p.route else None
+
+    def _companion_goal(self, p: PersonState) -> tuple[float, float] | None:
+        """A companion's next goal: its slot beside or behind its leader (and its speed, set
+        on ``p``); None to stand with a standing leader. Without a leader it walks alone."""
+        leader = self._by_id.get(p.leader)
+        if leader is None or leader is p:
+            p.behaviour = "walker"
+            return None
+        size = len(self._companions.get(p.leader, [])) + 1
+        slot = walking_group.slots(size)[min(p.slot, size - 2)]
+        found = walking_group.companion_goal(
+            (p.x, p.y), (leader.x, leader.y, leader.theta), leader.moving, slot, self._free)
+        if found is None:
+            return None
+        goal, p.speed_mps = found
+        return goal
+
+    def _waits_for_companions(self, p: PersonState) -> bool:
+        """A group's leader waits while a companion on its way is far behind its slot."""
+        group = self._companions.get(p.id)
+        if not group:
+            return False
+        slots = walking_group.slots(len(group) + 1)
+        here = (p.x, p.y, p.theta)
+        return any(c.moving > WAITING_MPS and not c.aside
+                   and walking_group.lagging((c.x, c.y), here, slots[min(c.slot, len(slots) - 1)])
+                   for c in group)
 
     def _approach_goal(
         self, p: PersonState, t: float, robot: tuple[float, float, float]
@@ -325,7 +367,7 @@ class Crowd:
                              robot: tuple[float, float, float], keep: float) -> tuple[float, float] | None:
         """People in a corridor walk around a robot that stands still (it waits for them);
         a moving robot, or one that leaves no room, is waited for."""
-        if p.behaviour != "walker" or self.robot_speed > ROBOT_HALTED_MPS:
+        if p.behaviour not in WALKING or self.robot_speed > ROBOT_HALTED_MPS:
             return None
         return self._around_robot_step(p, ux, uy, step, robot, keep)
 
@@ -355,7 +397,7 @@ class Crowd:
         vx, vy = ux * step, uy * step
         rx, ry = robot[0] - p.x, robot[1] - p.y
         ahead = rx * ux + ry * uy
-        if p.behaviour == "walker" and 0.0 < ahead < AVOID_LOOKAHEAD_M + rr:
+        if p.behaviour in WALKING and 0.0 < ahead < AVOID_LOOKAHEAD_M + rr:
             side = -1.0 if (ux * ry - uy * rx) > 0 else 1.0  # away from the robot
             vx += -uy * side * SIDESTEP_MPS * dt
             vy += ux * side * SIDESTEP_MPS * dt

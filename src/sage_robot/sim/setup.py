@@ -129,7 +129,7 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
         return bool(hit >= d)
 
     place_poses = [p.pose.as_tuple() for p in places if p.name != settings.nav.initial_place]
-    people += spawn_crowd(
+    crowd = spawn_crowd(
         sim.pedestrians,
         rng,
         start[:2],
@@ -140,8 +140,11 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
         line_of_sight,
         start[2],
     )
+    for p in crowd:  # numbered after the scenario's people (a companion keeps its leader)
+        p.id += len(people)
+        p.leader += len(people) if p.leader >= 0 else 0
+    people += crowd
     for i, p in enumerate(people):
-        p.id = i
         if float(raycaster.clearance(p.x, p.y)[0]) < PERSON_RADIUS_M:
             raise ConfigError(f"person {i} at ({p.x:.2f}, {p.y:.2f}) stands in a wall")
     lm = settings.robot.lidar

@@ -19,9 +19,12 @@ from sage_robot.sim.people import (
     Lanes,
     PersonState,
 )
+from sage_robot.sim.walking_group import GROUP_WALK_MPS, slot_point, slots
 
-MIX = ("walker", "stander", "approacher", "group")  # then walkers
+MIX = ("walker", "stander", "approacher", "group", "walking_group")  # then walkers
 GROUP_SIZE = 3
+WALKING_GROUP_SIZE = 2  # most groups on foot are pairs (Moussaïd et al. 2010)
+MAX_COMPANIONS = 3  # a scenario walker walks with at most this many companions
 GROUP_RING_M = 0.55  # members stand on a circle this wide around the group's centre
 GROUP_FROM_PLACE_M = (1.5, 2.5)  # a group stands this far beyond a place...
 GROUP_SPREAD_RAD = math.pi / 3  # ...within this angle of the direction the place faces
@@ -29,7 +32,7 @@ APPROACHER_FROM_ROBOT_M = (3.0, 10.0)
 SPAWN_TRIES = 200
 SMALL_FLOOR_MIN_DIST_M = 2.0  # where no spot is SPAWN_MIN_DIST_M from the robot, people start this far
 BEHAVIOURS = ("walker", "stander", "group", "approacher")
-PERSON_KEYS = {"kind", "at", "to", "heading", "speed", "start_s", "stay_s"}
+PERSON_KEYS = {"kind", "at", "to", "heading", "speed", "start_s", "stay_s", "companions"}
 
 Clearance = Callable[[float, float], np.ndarray]
 SampleFree = Callable[[np.random.Generator], tuple[float, float]]
@@ -47,7 +50,8 @@ def spawn_crowd(
     line_of_sight: LineOfSight,
     robot_yaw: float = 0.0,
 ) -> list[PersonState]:
-    """``n`` people, in the mix walker, stander, approacher, a group of three, then walkers.
+    """``n`` people, in the mix walker, stander, approacher, a group of three standing, a
+    pair walking together, then walkers.
 
     ``places`` are (x, y, facing) of the named places (groups gather beyond one of them)."""
     people: list[PersonState] = []
@@ -84,6 +88,17 @@ def spawn_crowd(
         if kind == "group" and places:
             size = min(GROUP_SIZE, n - len(people))
             people += _group(pid, size, rng, places, clear, far)
+            continue
+        if kind == "walking_group" and n - len(people) >= WALKING_GROUP_SIZE:
+            room = slots(WALKING_GROUP_SIZE)
+
+            def fits(x: float, y: float, h: float = heading, room: Any = room) -> bool:
+                return far(x, y) and all(clear(*slot_point((x, y, h), s[1]), PERSON_RADIUS_M + 0.1)
+                                         for s in room)
+
+            x, y = spot(fits)
+            people += walking_party(pid, (x, y, heading), WALKING_GROUP_SIZE - 1,
+                                    float(rng.uniform(*GROUP_WALK_MPS)))
             continue
         if kind == "approacher":
             # Somewhere in sight of the spot in front of the robot where they will stand.
@@ -153,12 +168,26 @@ def _group(
     return out
 
 
+def walking_party(pid: int, leader: tuple[float, float, float], companions: int,
+                  speed_mps: float) -> list[PersonState]:
+    """A walker (id ``pid``, at ``leader``) and ``companions`` people in single file behind it,
+    who walk with it (``sim/walking_group.py``)."""
+    x, y, heading = leader
+    out = [PersonState(pid, x, y, heading, "walker", speed_mps=speed_mps)]
+    for k, (_, in_file) in enumerate(slots(companions + 1)):
+        cx, cy = slot_point(leader, in_file)
+        out.append(PersonState(pid + 1 + k, cx, cy, heading, "companion", speed_mps=speed_mps,
+                               leader=pid, slot=k))
+    return out
+
+
 def people_from_specs(
     specs: list[dict[str, Any]], first_id: int, resolve: Callable[[Any, str], tuple[float, float, float]]
 ) -> list[PersonState]:
-    """Scenario people: ``{kind, at, to, heading, speed, start_s, stay_s}``; ``at``/``to`` are
-    [x, y] or a place name (``resolve`` turns them into poses)."""
-    out = []
+    """Scenario people: ``{kind, at, to, heading, speed, start_s, stay_s, companions}``;
+    ``at``/``to`` are [x, y] or a place name (``resolve`` turns them into poses); a walker with
+    ``companions: N`` (1-3) walks with N more people, who start in single file behind it."""
+    out: list[PersonState] = []
     for i, spec in enumerate(specs):
         where = f"people[{i}]"
         if not isinstance(spec, dict):
@@ -176,12 +205,26 @@ def people_from_specs(
             raise ConfigError(f"{where}: needs 'at' ([x, y] or a place name)")
         x, y, yaw = resolve(spec["at"], f"{where}.at")
         heading = float(spec.get("heading", yaw))
-        p = PersonState(first_id + i, x, y, heading, kind, speed_mps=float(spec.get("speed", 1.0)))
+        companions = _companions(spec, kind, where)
+        party = walking_party(first_id + len(out), (x, y, heading), companions,
+                              float(spec.get("speed", 1.0)))
+        p = party[0]
+        p.behaviour = kind
         if "to" in spec:
             tx, ty, _ = resolve(spec["to"], f"{where}.to")
             p.patrol = [(tx, ty), (x, y)]
             p.fixed = True
         p.start_s = float(spec.get("start_s", 0.0))
         p.stay_s = float(spec.get("stay_s", 60.0))
-        out.append(p)
+        out += party
     return out
+
+
+def _companions(spec: dict[str, Any], kind: str, where: str) -> int:
+    value = spec.get("companions", 0)
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_COMPANIONS:
+        raise ConfigError(f"{where}.companions must be a whole number from 0 to {MAX_COMPANIONS}, "
+                          f"got {value!r}")
+    if value and kind != "walker":
+        raise ConfigError(f"{where}: only a walker walks with companions (kind is {kind!r})")
+    return value

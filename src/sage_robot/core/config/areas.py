@@ -24,7 +24,7 @@ class SimSettings(Section):
         15.0, ge=0, description="Camera frames per second of wall time (0 = no camera)."
     )
     people_model: Literal["auto", "jupedsim", "simple"] = Field(
-        "simple", description="Pedestrian model: 'jupedsim' (optional extra 'people'), 'simple' (the "
+        "auto", description="Pedestrian model: 'jupedsim' (optional extra 'people'), 'simple' (the "
                               "hand-written walkers) or 'auto' (jupedsim when installed)."
     )
     people_ignore_share: float = Field(
