@@ -124,6 +124,21 @@ def test_people_stay_on_the_floor_and_out_of_the_robot() -> None:
     assert world.distance_m > 1.0  # the robot did drive among them
 
 
+@needs_jps
+def test_a_robot_off_the_peoples_floor_does_not_stop_the_world() -> None:
+    """The robot on floor the walkable polygon does not hold (near a wall its simplification
+    cut off, or across a wall from the people: JuPedSim refuses such a target, and on
+    willow the world crashed over it): its agent waits at the nearest point inside; people
+    walk on."""
+    grid = room(12.0, 6.0)
+    fill(grid, 6.0, 0.0, 6.2, 6.0)  # two rooms, no door
+    walker = _walker(0, 1.0, 3.0, (5.0, 3.0))
+    world = _world(grid, (3.0, 1.0, 0.0), [walker], "jupedsim")
+    world.x, world.y = 9.0, 3.0  # the robot is now in the other room
+    _run(world, 3.0)
+    assert walker.x > 3.0, "the walker did not walk on"
+
+
 # ---------------------------------------------------------------- the doorway
 def _doorway(model: str, ignore_share: float = 0.0) -> World:
     """Two rooms (12 m x 6 m in all) joined by a 1 m doorway at x 6.0-6.2, y 2.5-3.5; someone

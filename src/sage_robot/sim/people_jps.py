@@ -24,6 +24,7 @@ from typing import Any
 import jupedsim as jps
 import numpy as np
 import shapely
+import shapely.ops
 from scipy import ndimage
 
 from sage_robot.core.mapio import FREE, world_to_cell
@@ -51,6 +52,7 @@ MIN_HOLE_M2 = 0.05  # holes in the walkable polygon smaller than this are droppe
 SIMPLIFY_M = 0.05  # the walkable polygon is simplified to this tolerance
 NUDGE_M = (0.1, 0.2, 0.3, 0.45, 0.6)  # a person placed on another is moved this far...
 NUDGE_DIRECTIONS = 8  # ...in one of these directions (the first that fits)
+INSIDE_M = 0.05  # the robot's agent is sent this far inside the polygon when the robot is off it
 
 
 def walkable_polygon(grid: OccupancyGrid, start: tuple[float, float]) -> Any:
@@ -126,6 +128,7 @@ class JpsCrowd(Crowd):
         self._routes: dict[int, tuple[tuple[float, float], list[tuple[float, float]]]] = {}
         self._still_s = [0.0] * len(self.people)
         self._owed_s = 0.0  # simulated time not yet spent in JuPedSim ticks
+        self._inner: Any = None  # the polygon shrunk by INSIDE_M, made when first needed
 
     def _add(self, xy: tuple[float, float], radius: float, speed: float, what: str) -> int:
         params = jps.CollisionFreeSpeedModelAgentParameters(
@@ -179,11 +182,27 @@ class JpsCrowd(Crowd):
             agent.target = corner
             agent.model.desired_speed = 0.0 if self._guarded(p, corner, robot, rr) else p.speed_mps
         me = self._sim.agent(self._robot_agent)
-        me.target = (robot[0], robot[1])
+        me.target = self._robot_target(robot)
         me.model.desired_speed = ROBOT_AGENT_MPS
         self._sim.iterate()
         for i, p in enumerate(self.people):
             self._read_back(i, p, goals[i], robot, rr)
+
+    def _robot_target(self, robot: tuple[float, float, float]) -> tuple[float, float]:
+        """Where the robot's agent heads: the robot's true position, or the nearest point well
+        inside the walkable polygon when the robot is outside it (close to a wall the polygon's
+        simplification cut off, or on floor JuPedSim's people do not reach): JuPedSim refuses a
+        target outside its accessible area (measured on willow: the world crashed there)."""
+        xy = (robot[0], robot[1])
+        if self._routing.is_routable(xy):
+            return xy
+        if self._inner is None:
+            self._inner = self.polygon.buffer(-INSIDE_M)
+        if self._inner.is_empty:
+            return (float(self._sim.agent(self._robot_agent).position[0]),
+                    float(self._sim.agent(self._robot_agent).position[1]))
+        q = shapely.ops.nearest_points(self._inner, shapely.Point(xy))[0]
+        return (float(q.x), float(q.y))
 
     def _reachable(self, p: PersonState, goal: tuple[float, float] | None) -> tuple[float, float] | None:
         """``goal``, or None (and the goal dropped) when it is off the walkable polygon (a
