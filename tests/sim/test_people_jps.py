@@ -139,6 +139,20 @@ def test_a_robot_off_the_peoples_floor_does_not_stop_the_world() -> None:
     assert walker.x > 3.0, "the walker did not walk on"
 
 
+@pytest.mark.parametrize("model", BACKENDS)
+def test_a_walker_held_up_by_the_robot_turns_away_on_a_map_without_lanes(model: str) -> None:
+    """A robot stands in a 1 m corridor no one can pass it in: a walker coming its way waits a
+    while, then goes elsewhere (it used to wait for good, and the robot waited for it)."""
+    walker = PersonState(0, 2.0, 0.55, behaviour="walker", speed_mps=1.0, route=[(14.0, 0.55)])
+    world = _world(_corridor(width_m=1.0), (7.0, 0.55, math.pi), [walker], model, seed=2)
+    _run(world, 5.0)
+    assert math.hypot(walker.x - 7.0, walker.y - 0.55) < 1.5, "the walker never reached the robot"
+    away = []
+    _run(world, 20.0, lambda w: away.append(math.hypot(walker.x - 7.0, walker.y - 0.55)))
+    assert max(away) > 1.5, f"the walker stayed at the robot: at most {max(away):.2f} m from it"
+    assert walker.x < 7.0
+
+
 # ---------------------------------------------------------------- the doorway
 def _doorway(model: str, ignore_share: float = 0.0) -> World:
     """Two rooms (12 m x 6 m in all) joined by a 1 m doorway at x 6.0-6.2, y 2.5-3.5; someone

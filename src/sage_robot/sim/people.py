@@ -46,6 +46,8 @@ WALL_MARGIN_M = 0.05  # people keep their body this far clear of walls
 ARRIVE_M = 0.15
 SPAWN_MIN_DIST_M = 5.0  # random people start at least this far from the robot
 EDGE_TRIES = 50
+RANDOM_SPOT_M = 8.0  # on a map without lanes people walk to random spots this far (x and y)
+ROOMY_M = 0.3  # ... with this much room around their body
 WAITING_MPS = 0.05  # a person slower than this is standing (a leader does not wait for them)
 WALKING = ("walker", "companion")  # people who step aside from the robot's way and walk around it
 CORRIDOR_HALF_MIN_M = 0.8  # lane edges at least this half-wide are corridors (spurs are narrower)
@@ -322,22 +324,40 @@ class Crowd:
         p.route.append((float(target[0]), float(target[1])))
         p.prev_node, p.node = p.node, b
 
-    def _turn_back(self, p: PersonState) -> None:
-        """Give up waiting for the robot: back along the lane it came by (walkers on lanes)."""
+    def _turn_back(self, p: PersonState, robot: tuple[float, float, float] | None = None) -> None:
+        """Give up waiting for the robot: back along the lane it came by (walkers on lanes), or,
+        on a map without lanes, off to another spot (a walker that kept waiting there stood in
+        the robot's way for good while the robot waited for it: measured on willow with
+        JuPedSim's people, whose guard stops them short of the robot)."""
         p.waited_s = 0.0
-        if p.behaviour != "walker" or p.patrol or self.lanes is None or p.prev_node < 0:
+        if p.behaviour != "walker" or p.patrol:
+            return
+        if self.lanes is None:
+            p.route = [self._random_free(p, away_from=robot)]
+            return
+        if p.prev_node < 0:
             return
         back = self.lanes.nodes[p.prev_node]
         p.route = [(float(back[0]), float(back[1]))]
         p.prev_node, p.node = p.node, p.prev_node
 
-    def _random_free(self, p: PersonState) -> tuple[float, float]:
+    def _random_free(self, p: PersonState, away_from: tuple[float, float, float] | None = None
+                     ) -> tuple[float, float]:
+        """A random spot with room (ROOMY_M from walls), within 8 m. With ``away_from`` (the
+        robot's pose): one on the far side of the person from it, with room for a body where
+        no roomy one is drawn (a narrow corridor); where the person stands when none is."""
+        relaxed = None
         for _ in range(50):
-            x = p.x + float(self.rng.uniform(-8, 8))
-            y = p.y + float(self.rng.uniform(-8, 8))
-            if self.clearance(x, y) > PERSON_RADIUS_M + 0.3 and (self.is_free is None or self.is_free(x, y)):
+            x = p.x + float(self.rng.uniform(-RANDOM_SPOT_M, RANDOM_SPOT_M))
+            y = p.y + float(self.rng.uniform(-RANDOM_SPOT_M, RANDOM_SPOT_M))
+            away = away_from is None or (
+                (x - p.x) * (away_from[0] - p.x) + (y - p.y) * (away_from[1] - p.y) < 0.0)
+            if not away or not self._free(x, y):
+                continue
+            if self.clearance(x, y) > PERSON_RADIUS_M + ROOMY_M:
                 return (x, y)
-        return (p.x, p.y)
+            relaxed = relaxed or ((x, y) if away_from is not None else None)
+        return relaxed or (p.x, p.y)
 
     def _free(self, x: float, y: float) -> bool:
         return self.clearance(x, y) >= PERSON_RADIUS_M + WALL_MARGIN_M and (
@@ -389,7 +409,7 @@ class Crowd:
         ):
             p.waited_s += dt  # held up at the robot: waiting, or circling it without getting by
             if p.waited_s >= TURN_BACK_S:
-                self._turn_back(p)
+                self._turn_back(p, robot)
                 return
         else:
             p.waited_s = 0.0

@@ -258,7 +258,7 @@ class JpsCrowd(Crowd):
         if math.hypot(robot[0] - x, robot[1] - y) < PERSON_RADIUS_M + rr + ROBOT_GAP_M + HELD_UP_M:
             p.waited_s += JPS_STEP_S  # held up at the robot, as in the simple model
             if p.waited_s >= TURN_BACK_S:
-                self._turn_back(p)
+                self._turn_back(p, robot)
                 self._still_s[i] = 0.0
             return
         if self._still_s[i] >= STUCK_S:  # wedged (a crowd, a corner): give this goal up
