@@ -20,7 +20,7 @@ from sage_robot.nav.costmap import (
 )
 from sage_robot.nav.planner import NoPath, path_length, plan
 
-from ..support.grids import draw, room
+from ..support.grids import UNKNOWN, draw, fill, room
 
 CORRIDOR = """
 ####################
@@ -162,3 +162,28 @@ def test_scikit_image_backend_plans_the_same_way(monkeypatch) -> None:
     with_mcp = plan(cm, (1.0, 2.5), (9.0, 1.0))
     assert (cm.cost_at(with_mcp.points[:, 0], with_mcp.points[:, 1]) < INSCRIBED).all()
     assert with_mcp.length_m == pytest.approx(with_astar.length_m, rel=0.1)
+
+
+def test_a_robot_standing_in_unexplored_space_plans_its_way_out() -> None:
+    """A SLAM map's unknown patch the robot has ended up in (willow-2010: every later goal
+    failed "boxed in"): it plans out over the patch where its body fits; not through walls,
+    and not across more than ESCAPE_UNKNOWN_M of it."""
+    grid = room(10.0, 6.0, resolution=0.05)
+    fill(grid, 3.0, 1.0, 6.0, 5.0, UNKNOWN)  # a 3 m x 4 m unseen patch (not a speckle)
+    cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0)
+    inside = (3.8, 3.0)  # 0.8 m into the patch
+    p = plan(cm, inside, (8.5, 3.0))
+    assert p.points[0] == pytest.approx(inside)
+    assert p.length_m < 6.0  # straight out of the patch's west side and round it, not a detour
+    outside = cm.cost_at(p.points[:, 0], p.points[:, 1]) != NO_INFORMATION
+    assert outside[len(p.points) // 2:].all(), "the path wandered through the patch"
+    deep = room(10.0, 6.0, resolution=0.05)
+    fill(deep, 2.5, 1.0, 7.5, 5.0, UNKNOWN)
+    with pytest.raises(NoPath, match="boxed in"):  # 2 m from any edge: further than it plans blind
+        plan(Costmap.from_grid(deep, 0.25, 0.55, 3.0), (5.0, 3.0), (9.0, 3.0))
+    walled = room(10.0, 6.0, resolution=0.05)
+    fill(walled, 3.0, 1.0, 6.0, 5.0, UNKNOWN)
+    fill(walled, 3.4, 2.6, 4.2, 3.4)  # a wall ring close round the robot: no way out
+    fill(walled, 3.6, 2.8, 4.0, 3.2, UNKNOWN)
+    with pytest.raises(NoPath, match="boxed in"):
+        plan(Costmap.from_grid(walled, 0.25, 0.55, 3.0), inside, (8.5, 3.0))

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from sage_robot.nav.costmap import INSCRIBED, MAX_NON_OBSTACLE, Costmap
+from sage_robot.nav.costmap import INSCRIBED, MAX_NON_OBSTACLE, NO_INFORMATION, Costmap
 
 COST_WEIGHT = 3.0  # extra step weight at cost 252 (so the path keeps off walls)
 MAX_FINE_CELLS = 400_000  # above this many cells, plan on a coarser grid
@@ -37,6 +37,11 @@ GOAL_SEARCH_RADIUS_M = 0.3  # a goal inside an inflated cell moves to the neares
 # each step through one weighs NARROW_WEIGHT more, about 0.5 m of detour per 5 cm cell.
 NARROW_MARGIN_M = 0.1
 NARROW_WEIGHT = 10.0
+# A robot that stands in unexplored space (a SLAM map's unknown patch the controller cut
+# through: measured on willow-2010, where every later goal failed "boxed in") plans its way out
+# over at most this much of it, on cells its body fits in, at the step weight of a narrow gap.
+ESCAPE_UNKNOWN_M = 1.5
+BOXED_IN = "the robot is boxed in where it stands"
 
 
 class NoPath(Exception):
@@ -218,6 +223,40 @@ def _fine_in_band(costmap: Costmap, cells: np.ndarray, f: int, start: tuple[floa
     return out
 
 
+def _escape_unknown(costmap: Costmap, weights: np.ndarray, start: tuple[float, float]) -> np.ndarray:
+    """``weights`` (the fine grid's) with the unknown cells within ESCAPE_UNKNOWN_M of
+    ``start`` passable where the robot's body fits (no wall or obstacle within its inscribed
+    radius), at a narrow gap's weight: the way out of unexplored space the robot stands in."""
+    g = costmap.geom
+    r, c = (int(v) for v in g.to_cell(start[0], start[1]))
+    k = math.ceil(ESCAPE_UNKNOWN_M / g.resolution)
+    r0, r1 = max(r - k, 0), min(r + k + 1, g.shape[0])
+    c0, c1 = max(c - k, 0), min(c + k + 1, g.shape[1])
+    if r0 >= r1 or c0 >= c1:
+        return weights
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    near = np.hypot(rr - r, cc - c) <= k
+    fits = costmap.dist[r0:r1, c0:c1] > costmap.inscribed_m
+    way_out = near & fits & (costmap.cost[r0:r1, c0:c1] == NO_INFORMATION)
+    out: np.ndarray = weights.copy()
+    out[r0:r1, c0:c1][way_out] = 1.0 + COST_WEIGHT + NARROW_WEIGHT
+    return out
+
+
+def _start_cell(costmap: Costmap, weights: np.ndarray, start: tuple[float, float],
+                at: tuple[int, int], radius: int) -> tuple[tuple[int, int], bool, np.ndarray]:
+    """The free cell nearest ``start`` (its cell ``at``, on the grid of ``weights``), whether
+    it was found only by escaping unexplored space, and the weights to search with then."""
+    s = _nearest_free(weights, at, radius)
+    if s is not None:
+        return s, False, weights
+    weights = _escape_unknown(costmap, weights, start)
+    s = _nearest_free(weights, at, radius)
+    if s is None:
+        raise NoPath(BOXED_IN)
+    return s, True, weights
+
+
 def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float],
          max_cells: int = MAX_FINE_CELLS, fine_fallback: bool = True, open_pool: bool = True) -> Plan:
     """A smoothed path from ``start`` to ``goal`` (map frame, m). Raises :class:`NoPath`.
@@ -241,9 +280,10 @@ def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float]
     def cell(p: tuple[float, float]) -> tuple[int, int]:
         return (int((p[1] - g.origin_y) // res), int((p[0] - g.origin_x) // res))
 
-    s = _nearest_free(weights, cell(start), radius + 1)
-    if s is None:
-        raise NoPath("the robot is boxed in where it stands")
+    if factor > 1 and _nearest_free(weights, cell(start), radius + 1) is None:
+        # standing in unexplored space? its way out is found on the fine grid
+        return plan(costmap, start, goal, max_cells=costmap.cost.size, fine_fallback=False)
+    s, escaping, weights = _start_cell(costmap, weights, start, cell(start), radius + 1)
     gl = _nearest_free(weights, cell(goal), radius)
     if gl is None:
         raise NoPath("the goal is inside an obstacle or outside the map")
@@ -258,6 +298,8 @@ def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float]
         fine = smooth(fine, costmap)
         return Plan(fine, path_length(fine))
     if cells is None:
+        if escaping:
+            raise NoPath(BOXED_IN)
         if factor > 1 and fine_fallback:
             # a gap narrower than a coarse cell may still be passable: search the fine grid
             return plan(costmap, start, goal, max_cells=costmap.cost.size, fine_fallback=False)
