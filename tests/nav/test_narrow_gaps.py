@@ -225,3 +225,25 @@ def test_unknown_speckles_in_free_space_do_not_block_but_unexplored_space_does()
     cm = Costmap.from_grid(g, 0.25, 0.55, 3.0)
     assert cm.cost_at(3.025, 1.525)[()] < INSCRIBED
     assert cm.cost_at(5.0, 0.7)[()] == NO_INFORMATION
+
+
+@pytest.mark.parametrize(("sizes", "moved", "says", "never"), [
+    ([0.3], True, "for people to step aside", "could not get past"),
+    ([], True, "could not get past (2.6, 1.5) and", "people"),  # what moved has gone: not people
+    ([], False, "nothing there moved", "people"),
+    ([0.3], False, "someone standing still", "for people"),
+    ([1.2], False, "an obstacle that is not on the map", "someone"),
+])
+def test_the_reason_for_giving_up_says_what_it_saw(sizes, moved, says, never) -> None:
+    """willow-2010 with people: "I waited 60 s for people to step aside" with nobody within
+    5 m (someone had crossed the robot's view during the wait; nothing was on its path)."""
+    from sage_robot.nav.costmap import Costmap
+    from sage_robot.nav.drive import GoalRun, Target
+
+    host = _Host(Costmap.from_grid(room(6.0, 3.0, RES), 0.25, 0.55, 3.0), (2.6, 1.5, 0.0), False)
+    run = GoalRun(host, Target("ROOM_B", "room b", (5.0, 1.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type, unused-ignore]
+    run._blocker_sizes, run._blocker_moved, run._waited_s = sizes, moved, 60.0
+    why = run._why_blocked()
+    assert says in why, why
+    assert never not in why, why
+    assert "room b" in why

@@ -328,10 +328,11 @@ class GoalRun:
         return ""
 
     def _why_blocked(self) -> str:
-        """Why the robot gives up, as it saw it: people when what blocks the intended path moved
-        while it watched; an obstacle not on the map when it stood still and is bigger than a
-        person; an obstacle or someone standing still when it stood still and is person-sized
-        (a box's face and a person's legs look alike to a lidar)."""
+        """Why the robot gives up, as it saw it: people when something is on the intended path
+        at the last look and what blocked it moved while it watched; an obstacle not on the
+        map when it stood still and is bigger than a person; an obstacle or someone standing
+        still when it stood still and is person-sized (a box's face and a person's legs look
+        alike to a lidar); where it could not get on when nothing is on the path."""
         where = f"to {self.target.spoken}" if self.target.name else "to the goal"
         sizes = self._blocker_sizes
         if sizes and not self._blocker_moved:
@@ -344,13 +345,16 @@ class GoalRun:
                 return (f"the way {where} is blocked by something not on the map, about "
                         f"{max(sizes):.1f} m across: an obstacle, or someone standing still{waited}; "
                         "I found no way around it")
-        if sizes or self._blocker_moved:
+        if sizes:  # on the path at the last look, and it moved while the robot watched: people
             waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
                 if self._waited_s >= 1.0 else "people are in the way and "
             return f"the way {where} is blocked: {waited}found no way around"
+        # Nothing on the path at the last look (what moved earlier has gone: willow-2010 said
+        # "I waited 60 s for people" with nobody within 5 m): the robot could not get on.
         x, y, _ = self.pose()
-        return (f"the way {where} is blocked: I could not get past ({x:.1f}, {y:.1f}), nothing there "
-                "moved, and I found no way around")
+        still = "" if self._blocker_moved else ", nothing there moved,"
+        return (f"the way {where} is blocked: I could not get past ({x:.1f}, {y:.1f}){still} "
+                "and I found no way around")
 
     async def _settle_note(self, pose: tuple[float, float, float]) -> str:
         """Within SETTLE_NEAR_GOAL_M of a goal that something the scan sees stands on: arrive
