@@ -33,6 +33,7 @@ from sage_robot.core.msgs.nav import (
 )
 from sage_robot.core.node import Node
 from sage_robot.core.places import Place
+from sage_robot.nav.collision_guard import guarded, scan_points
 from sage_robot.nav.costmap import Costmap
 from sage_robot.nav.costmap_msg import costmap_grid
 from sage_robot.nav.drive import GoalRun, Target
@@ -58,6 +59,8 @@ class NavigatorNode(Node):
         self._odom: Pose | None = None
         self._correction: Pose | None = None
         self.scan: LaserScan | None = None
+        self._scan_base: np.ndarray | None = None  # the latest scan's returns in the robot's frame
+        self.guard_stops = 0  # commands the collision guard stopped (nav/collision_guard.py)
         self.health: LocalizationHealth | None = None
         self.commands = 0
         self.goals = 0
@@ -100,6 +103,9 @@ class NavigatorNode(Node):
 
     def _on_scan(self, msg: LaserScan) -> None:
         self.scan = msg
+        lidar = self.settings.robot.lidar
+        mount = (lidar.x_m, lidar.y_m, lidar.yaw_rad)
+        self._scan_base = scan_points(msg.angles, msg.ranges, msg.range_max, mount)
         pose = self.pose()
         if pose is None:
             return
@@ -125,6 +131,11 @@ class NavigatorNode(Node):
         if v < 0.0 and not self.settings.robot.allow_reverse:
             raise AssertionError("the navigator never reverses here")  # broken code, not bad input
         self.commands += 1
+        if self._scan_base is not None:  # the live scan's last word: never onto something seen
+            safe = guarded(v, w, self._scan_base, self.settings.robot.radius_m)
+            if safe != v:
+                self.guard_stops += 1
+                v = safe
         self.bus.publish(topics.CMD_VEL, Twist(float(v), float(w)))
 
     def stop(self) -> None:
