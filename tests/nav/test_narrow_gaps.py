@@ -170,11 +170,12 @@ class _Host:
     def pose(self):
         return self._pose
 
-    def command(self, v: float, w: float) -> None:
+    def command(self, v: float, w: float) -> float:
         self.cmds.append((v, w))
         x, y, th = self._pose
         dt = 0.05
         self._pose = (x + v * dt * math.cos(th), y + v * dt * math.sin(th), th + w * dt)
+        return v
 
     def stop(self) -> None:
         pass
@@ -247,3 +248,15 @@ def test_the_reason_for_giving_up_says_what_it_saw(sizes, moved, says, never) ->
     assert says in why, why
     assert never not in why, why
     assert "room b" in why
+
+
+def test_the_collision_guard_holding_the_robot_blocks_the_way() -> None:
+    from sage_robot.nav.drive import GUARD_BLOCKED_S, Blocked, _guard_hold
+
+    assert _guard_hold(0.0, 0.3, 0.3, None) is None  # sent as asked
+    assert _guard_hold(0.0, 0.0, 0.0, 5.0) is None  # not asked to move
+    since = _guard_hold(1.0, 0.3, 0.0, None)
+    assert since == 1.0
+    assert _guard_hold(1.0 + GUARD_BLOCKED_S / 2, 0.3, 0.0, since) == 1.0
+    with pytest.raises(Blocked, match="within a few centimetres"):
+        _guard_hold(1.0 + GUARD_BLOCKED_S, 0.3, 0.0, since)

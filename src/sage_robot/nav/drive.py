@@ -63,6 +63,7 @@ if TYPE_CHECKING:
     from sage_robot.nav.drive_host import DriveHost
 
 LOCALIZED_WAIT_S = 10.0  # wait this long for a first pose before giving up
+GUARD_BLOCKED_S = 2.0  # the collision guard holding the robot this long blocks the way (s)
 PROGRESS_RESET_M = 1.0  # driving this far after a recovery resets the recovery ladder
 CLEAR_SETTLE_S = 0.5  # after clearing the costmaps, let fresh scans come in (s)
 PLAN_DROP_WAIT_S = 5.0  # bound on waiting for a plan in flight when a drive ends (s)
@@ -229,6 +230,7 @@ class GoalRun:
         replan_period = 1.0 / self.node.settings.nav.replan_hz
         next_replan = self.clock.now() + replan_period
         lost_since: float | None = None
+        guard_since: float | None = None  # since when the collision guard has held the robot
         self.feedback(NavState.DRIVING)
         replan: asyncio.Future[Plan] | None = None
         try:
@@ -249,7 +251,7 @@ class GoalRun:
                     await self.social.pull_over(self.feedback)
                     continue
                 cmd = self.social.regulate(cmd, pose)
-                self.node.command(cmd.v, cmd.w)
+                guard_since = _guard_hold(now, cmd.v, self.node.command(cmd.v, cmd.w), guard_since)
                 self.remaining = ctl.remaining_m()
                 if replan is not None and replan.done():
                     fresh, replan = replan.result(), None  # raises Blocked when there is no way now
@@ -570,3 +572,16 @@ class GoalRun:
         node.stop()
         node.event("help_needed", "I am lost. Could someone help me, or set my position on the map?")
         raise ActionAborted("I am lost and could not find where I am; I need help")
+
+
+def _guard_hold(now: float, asked: float, sent: float, since: float | None) -> float | None:
+    """Since when the collision guard (``nav/collision_guard.py``) has held the robot that the
+    controller wants to move; raises Blocked once that is GUARD_BLOCKED_S (the recovery
+    ladder then steps away, replans or gives up with a reason, instead of a goal that never
+    ends: the TurtleBot sandbox timed out three legs in twelve without this)."""
+    if asked == 0.0 or sent != 0.0:
+        return None
+    since = now if since is None else since
+    if now - since >= GUARD_BLOCKED_S:
+        raise Blocked("the scan shows something within a few centimetres ahead")
+    return since

@@ -73,7 +73,7 @@ class DriveHost(Protocol):
         """Mark ``scan`` taken at ``pose`` into :attr:`global_cm` (called in the worker thread)."""
 
     # ---------------------------------------------------------------- what the node does
-    def command(self, v: float, w: float) -> None: ...
+    def command(self, v: float, w: float) -> float: ...  # returns the forward speed sent
 
     def stop(self) -> None: ...
 

@@ -127,7 +127,8 @@ class NavigatorNode(Node):
     def lost(self) -> bool:
         return bool(self.health is not None and self.health.lost)
 
-    def command(self, v: float, w: float) -> None:
+    def command(self, v: float, w: float) -> float:
+        """Publish (v, w) on /cmd_vel after the collision guard; returns the v sent."""
         if v < 0.0 and not self.settings.robot.allow_reverse:
             raise AssertionError("the navigator never reverses here")  # broken code, not bad input
         self.commands += 1
@@ -137,6 +138,7 @@ class NavigatorNode(Node):
                 self.guard_stops += 1
                 v = safe
         self.bus.publish(topics.CMD_VEL, Twist(float(v), float(w)))
+        return v
 
     def stop(self) -> None:
         self.bus.publish(topics.CMD_VEL, Twist())
