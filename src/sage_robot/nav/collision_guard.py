@@ -6,7 +6,7 @@ apart, the robot creeping at 0.15 m/s) is enough for the body to touch a pillar 
 This check uses the live scan alone, in the robot's own frame, as Nav2's collision monitor
 does: a command whose next control period would bring the body within ``MARGIN_M`` of a scan
 return, and closer to it than now, has its forward speed cut to zero (turning in place stays
-allowed: the body is a circle). Returns inside the body are the robot's own frame and ignored.
+allowed: the body is a circle). Returns inside the body are the robot itself and are ignored.
 
 Robot frame (base_link): x ahead, y left, metres; (v m/s, w rad/s).
 """
