@@ -326,9 +326,9 @@ class Crowd:
 
     def _turn_back(self, p: PersonState, robot: tuple[float, float, float] | None = None) -> None:
         """Give up waiting for the robot: back along the lane it came by (walkers on lanes), or,
-        on a map without lanes, off to another spot (a walker that kept waiting there stood in
-        the robot's way for good while the robot waited for it: measured on willow with
-        JuPedSim's people, whose guard stops them short of the robot)."""
+        on a map without lanes, off to another spot on its own side of the robot (it used to
+        keep waiting there, in the robot's way, while the robot waited for it; JuPedSim's
+        guard stops people short of the robot, so they never got round it)."""
         p.waited_s = 0.0
         if p.behaviour != "walker" or p.patrol:
             return
