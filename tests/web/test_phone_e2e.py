@@ -93,14 +93,18 @@ PAGE_PROBE = """
 
 
 def spoken_wav(folder: Path, text: str) -> Path:
-    """``text`` in the robot's Piper voice, padded with silence, as Chromium's microphone wants it."""
-    from sage_robot.voice.audio_io import resample, write_wav
-    from sage_robot.voice.tts import PiperEngine, default_speech, synthesize
+    """``text`` in the robot's Piper voice, padded with silence, as Chromium's microphone wants it.
+    Deterministic (no prosody noise): the same audio every run. With Piper's own noise, one CI
+    run in several heard "Take me to the cap-aid." and failed."""
+    from sage_robot.core.errors import ConfigError
+    from sage_robot.voice.audio_io import resample, to_int16, write_wav
+    from sage_robot.voice.tts import PiperEngine, Speech
 
-    if not isinstance(default_speech().engine, PiperEngine):
+    try:
+        speech = Speech(PiperEngine(deterministic=True))
+    except ConfigError:
         pytest.skip("the Piper voice is not installed: pip install 'sage-robot[voice-gpl]'")
-    pcm, rate = synthesize(text)
-    words = resample(pcm, rate, WAV_RATE_HZ)
+    words = resample(to_int16(speech.synthesize(text)), speech.sample_rate, WAV_RATE_HZ)
     pad = [np.zeros(round(s * WAV_RATE_HZ), np.int16) for s in (LEAD_SILENCE_S, TAIL_SILENCE_S)]
     return write_wav(folder / "speech.wav", np.concatenate([pad[0], words, pad[1]]), WAV_RATE_HZ)
 
