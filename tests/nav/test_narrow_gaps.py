@@ -236,8 +236,8 @@ def test_unknown_speckles_in_free_space_do_not_block_but_unexplored_space_does()
     ([1.2], False, "an obstacle that is not on the map", "someone"),
 ])
 def test_the_reason_for_giving_up_says_what_it_saw(sizes, moved, says, never) -> None:
-    """willow-2010 with people: "I waited 60 s for people to step aside" with nobody within
-    5 m (someone had crossed the robot's view during the wait; nothing was on its path)."""
+    """"People" only when something is on the path at the last look and it moved: the rule
+    used to say "I waited 60 s for people" whenever anything had moved during the wait."""
     from sage_robot.nav.costmap import Costmap
     from sage_robot.nav.drive import GoalRun, Target
 

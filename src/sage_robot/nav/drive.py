@@ -351,8 +351,8 @@ class GoalRun:
             waited = f"I waited {self._waited_s:.0f} s for people to step aside and " \
                 if self._waited_s >= 1.0 else "people are in the way and "
             return f"the way {where} is blocked: {waited}found no way around"
-        # Nothing on the path at the last look (what moved earlier has gone: willow-2010 said
-        # "I waited 60 s for people" with nobody within 5 m): the robot could not get on.
+        # Nothing on the path at the last look (whatever moved during the wait has gone): the
+        # robot could not get on; not people.
         x, y, _ = self.pose()
         still = "" if self._blocker_moved else ", nothing there moved,"
         return (f"the way {where} is blocked: I could not get past ({x:.1f}, {y:.1f}){still} "
