@@ -174,9 +174,12 @@ def test_a_robot_standing_in_unexplored_space_plans_its_way_out() -> None:
     inside = (3.8, 3.0)  # 0.8 m into the patch
     p = plan(cm, inside, (8.5, 3.0))
     assert p.points[0] == pytest.approx(inside)
-    assert p.length_m < 6.0  # straight out of the patch's west side and round it, not a detour
-    outside = cm.cost_at(p.points[:, 0], p.points[:, 1]) != NO_INFORMATION
-    assert outside[len(p.points) // 2:].all(), "the path wandered through the patch"
+    # straight out of the patch's west side (0.8 m) and round it through the 1 m gap above it
+    # (about 8.8 m), not a longer detour
+    assert p.length_m < 10.0
+    cost = cm.cost_at(p.points[:, 0], p.points[:, 1])
+    first_out = int(np.argmin(cost == NO_INFORMATION))
+    assert (cost[first_out:] < INSCRIBED).all(), "the path wandered through the patch"
     deep = room(10.0, 6.0, resolution=0.05)
     fill(deep, 2.5, 1.0, 7.5, 5.0, UNKNOWN)
     with pytest.raises(NoPath, match="boxed in"):  # 2 m from any edge: further than it plans blind
@@ -187,3 +190,24 @@ def test_a_robot_standing_in_unexplored_space_plans_its_way_out() -> None:
     fill(walled, 3.6, 2.8, 4.0, 3.2, UNKNOWN)
     with pytest.raises(NoPath, match="boxed in"):
         plan(Costmap.from_grid(walled, 0.25, 0.55, 3.0), inside, (8.5, 3.0))
+
+
+def test_a_plan_from_the_edge_of_unexplored_space_goes_round_the_walls() -> None:
+    """willow-2010 (issue #20): the robot's centre had drifted 5 cm into an unknown patch beside
+    its path; every plan from there was a straight line to the goal through the patch and the
+    walls beyond it (a smoothing shortcut from a start in unknown space counted as free), and the
+    controller stopped at the first wall for good. The path leaves the patch and then keeps to
+    passable cells."""
+    grid = room(10.0, 6.0, resolution=0.05)
+    fill(grid, 4.0, 2.6, 6.0, 3.4, UNKNOWN)  # an unseen patch 2 m x 0.8 m
+    fill(grid, 2.0, 2.0, 8.0, 2.1)  # a wall below it, with a way round at each end
+    cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0)
+    start, goal = (5.0, 3.35), (5.0, 1.0)  # 5 cm inside the patch's top edge; the goal below the wall
+    p = plan(cm, start, goal)
+    cost = cm.cost_at(p.points[:, 0], p.points[:, 1])
+    unknown = cost == NO_INFORMATION
+    first_out = int(np.argmin(unknown))
+    assert first_out > 0, "the path starts in the patch"
+    assert not unknown[first_out:].any(), "the path wandered through the patch"
+    assert (cost[first_out:] < INSCRIBED).all(), "the path cuts through a wall or its inscribed zone"
+    assert p.length_m > 5.0  # round an end of the wall, not the 2.35 m straight line through it

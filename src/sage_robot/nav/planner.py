@@ -135,7 +135,11 @@ def _line_free(costmap: Costmap, a: np.ndarray, b: np.ndarray, limit: int) -> bo
 
 def smooth(points: np.ndarray, costmap: Costmap) -> np.ndarray:
     """Shortcut the grid path where a straight line stays in cells no costlier than the ones the
-    path already crosses (so it does not cut closer to walls), then resample evenly."""
+    path already crosses (so it does not cut closer to walls) and passable (below
+    ``INSCRIBED``: a path that starts in unknown space or in a wall's inscribed zone keeps its
+    grid steps until it is out; issue #20: from a start in an unknown patch every line counted
+    as free, and the plan became a straight line to the goal through the walls), then resample
+    evenly."""
     if len(points) < 3:
         return resample(points, PATH_SPACING_M)
     out = points
@@ -148,7 +152,8 @@ def smooth(points: np.ndarray, costmap: Costmap) -> np.ndarray:
             step = max(1, (len(out) - i) // 2)
             # furthest visible point, probed coarsely then linearly
             while j > i + 1:
-                limit = int(max(costs[i:j + 1].max(), 1)) + 1
+                # never through an inscribed, lethal or unknown cell, even from a start in one
+                limit = min(int(max(costs[i:j + 1].max(), 1)) + 1, INSCRIBED)
                 if _line_free(costmap, out[i], out[j], limit):
                     break
                 j = max(i + 1, j - step)
