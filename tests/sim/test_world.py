@@ -11,9 +11,12 @@ from PIL import Image
 
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs.sim import LowObstacle
+from sage_robot.core.paths import waypoints_yaml
+from sage_robot.core.places import load_places
 from sage_robot.sim.lidar import LidarSpec
 from sage_robot.sim.people import PersonState
 from sage_robot.sim.setup import build_world
+from sage_robot.sim.spawn import STAND_OFF_PLACE_M
 from sage_robot.sim.world import Collision, World
 
 from ..support.grids import draw
@@ -231,3 +234,19 @@ def test_standers_stand_by_a_wall(seed: int) -> None:
     w = build_world(load_profile(None, {"sim": {"seed": seed, "pedestrians": 6}}))
     for p in (p for p in w.crowd.people if p.behaviour == "stander"):
         assert w.raycaster.clearance_at(p.x, p.y) < 0.25 + 0.2, (p.x, p.y)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
+def test_people_who_stand_for_good_keep_off_the_places(seed: int) -> None:
+    """A tour stop is where visitors come and go: the stander and a standing group keep
+    STAND_OFF_PLACE_M from every place (the dock too), and everyone starts on the robot's floor."""
+    settings = load_profile(None, {"sim": {"seed": seed, "pedestrians": 8}})
+    w = build_world(settings)
+    places = load_places(waypoints_yaml(settings))
+    standing = [p for p in w.crowd.people if p.behaviour in ("stander", "group")]
+    assert {p.behaviour for p in standing} == {"stander", "group"}
+    for p in standing:
+        near = min(math.hypot(p.x - q.pose.x, p.y - q.pose.y) for q in places)
+        assert near >= STAND_OFF_PLACE_M, (p.behaviour, p.x, p.y)
+    for p in w.crowd.people:
+        assert w.raycaster.is_free(p.x, p.y), (p.behaviour, p.x, p.y)

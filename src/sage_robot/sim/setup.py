@@ -111,10 +111,18 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
     lanes = Lanes.from_dict(extras.get("lanes"))
     people = people_from_specs(list(scenario.people) if scenario else [], 0, resolve)
     rng = np.random.default_rng(np.random.SeedSequence(sim.seed).spawn(SPAWN_STREAM + 1)[SPAWN_STREAM])
+    walkable = _walkable_from(grid, raycaster, start)
     free_cells = np.flatnonzero(
-        _walkable_from(grid, raycaster, start).ravel()
-        & (raycaster.edt_cells.ravel() * raycaster.res >= FREE_SPOT_CLEARANCE_M)
+        walkable.ravel() & (raycaster.edt_cells.ravel() * raycaster.res >= FREE_SPOT_CLEARANCE_M)
     )
+
+    def floor_clearance(x: float, y: float) -> np.ndarray:
+        """The clearance of a spot on the robot's floor; 0 elsewhere (unknown space outside the
+        walls is no floor: a standing group was placed out there in the TurtleBot sandbox)."""
+        r, c = world_to_cell(grid, x, y)
+        row, col = int(r), int(c)
+        on_floor = 0 <= row < grid.height and 0 <= col < grid.width and bool(walkable[row, col])
+        return raycaster.clearance(x, y) if on_floor else np.zeros(1)
 
     def sample_free(g: np.random.Generator) -> tuple[float, float]:
         if free_cells.size == 0:
@@ -135,10 +143,11 @@ def build_world(settings: Settings, scenario: Scenario | None = None) -> World:
         start[:2],
         lanes,
         place_poses,
-        raycaster.clearance,
+        floor_clearance,
         sample_free,
         line_of_sight,
         start[2],
+        keep_off=[(p.pose.x, p.pose.y) for p in places],
     )
     for p in crowd:  # numbered after the scenario's people (a companion keeps its leader)
         p.id += len(people)

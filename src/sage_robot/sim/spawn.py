@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import Any
@@ -31,6 +32,12 @@ GROUP_SPREAD_RAD = math.pi / 3  # ...within this angle of the direction the plac
 APPROACHER_FROM_ROBOT_M = (3.0, 10.0)
 SPAWN_TRIES = 200
 SMALL_FLOOR_MIN_DIST_M = 2.0  # where no spot is SPAWN_MIN_DIST_M from the robot, people start this far
+# People who stand for good (the stander, a standing group) stand at least this far from every
+# named place, where the floor allows: a tour stop is where visitors come and go, not where
+# someone stays for hours (issue #20: in the TurtleBot sandbox a stander drawn 0.3 m from a place
+# made every leg to it end short, "someone is standing at the spot"). The visitor who walks up
+# to the robot and stays a while still comes anywhere.
+STAND_OFF_PLACE_M = 1.2  # (m): a robot at the place keeps 0.7 m from them
 BEHAVIOURS = ("walker", "stander", "group", "approacher")
 PERSON_KEYS = {"kind", "at", "to", "heading", "speed", "start_s", "stay_s", "companions"}
 
@@ -49,11 +56,16 @@ def spawn_crowd(
     sample_free: SampleFree,
     line_of_sight: LineOfSight,
     robot_yaw: float = 0.0,
+    keep_off: list[tuple[float, float]] | None = None,
 ) -> list[PersonState]:
     """``n`` people, in the mix walker, stander, approacher, a group of three standing, a
     pair walking together, then walkers.
 
-    ``places`` are (x, y, facing) of the named places (groups gather beyond one of them)."""
+    ``places`` are (x, y, facing) of the named places (groups gather beyond one of them);
+    people who stand for good keep ``STAND_OFF_PLACE_M`` from the spots in ``keep_off`` (every
+    place, the dock too; default: ``places``) where the floor allows."""
+    off = [(x, y) for x, y, _ in places] if keep_off is None else keep_off
+    off_places = functools.partial(_off_places, off)
     people: list[PersonState] = []
 
     def clear(x: float, y: float, need: float) -> bool:
@@ -65,9 +77,9 @@ def spawn_crowd(
         d = math.hypot(x - robot_xy[0], y - robot_xy[1])
         return (near_m[0] if lo is None else lo) <= d <= hi
 
-    def spot(ok: Callable[[float, float], bool], edge: bool = False,
-             relax: bool = True) -> tuple[float, float]:
-        found = _draw(rng, lanes, sample_free, clear, ok, edge)
+    def spot(ok: Callable[[float, float], bool], edge: bool = False, relax: bool = True,
+             prefer: Callable[[float, float], bool] | None = None) -> tuple[float, float]:
+        found = _draw(rng, lanes, sample_free, clear, ok, edge, prefer)
         if found is None and relax and near_m[0] > SMALL_FLOOR_MIN_DIST_M:
             # a floor with no room SPAWN_MIN_DIST_M from the robot (the TurtleBot sandbox is 5.6 m
             # across): people start nearer, from here on (a large map never gets here: same crowd)
@@ -85,9 +97,9 @@ def spawn_crowd(
         k += 1
         pid = len(people)
         heading = float(rng.uniform(-math.pi, math.pi))
-        if kind == "group" and places:
+        if kind == "group" and places:  # where no group fits, the mix goes on without one
             size = min(GROUP_SIZE, n - len(people))
-            people += _group(pid, size, rng, places, clear, far)
+            people += _group(pid, size, rng, places, clear, far, off_places)
             continue
         if kind == "walking_group" and n - len(people) >= WALKING_GROUP_SIZE:
             room = slots(WALKING_GROUP_SIZE)
@@ -120,7 +132,8 @@ def spawn_crowd(
                 )
             )
             continue
-        x, y = spot(far, edge=kind == "stander")  # standers stand by a wall, out of the way
+        # standers by a wall, out of the way (and off the places where the floor allows)
+        x, y = spot(far, edge=True, prefer=off_places) if kind == "stander" else spot(far)
         behaviour = "stander" if kind == "stander" else "walker"
         people.append(
             PersonState(pid, x, y, heading, behaviour, speed_mps=float(rng.uniform(*WALK_SPEED_MPS)))
@@ -128,10 +141,19 @@ def spawn_crowd(
     return people
 
 
+def _off_places(spots: list[tuple[float, float]], x: float, y: float) -> bool:
+    return all(math.hypot(x - px, y - py) >= STAND_OFF_PLACE_M for px, py in spots)
+
+
 def _draw(rng: np.random.Generator, lanes: Lanes | None, sample_free: SampleFree,
           clear: Callable[[float, float, float], bool], ok: Callable[[float, float], bool],
-          edge: bool) -> tuple[float, float] | None:
-    """A free spot a person fits on that ``ok`` accepts, in SPAWN_TRIES draws; None if none."""
+          edge: bool, prefer: Callable[[float, float], bool] | None = None) -> tuple[float, float] | None:
+    """A free spot a person fits on that ``ok`` accepts, in SPAWN_TRIES draws; None if none.
+    With ``prefer``: one it also accepts, if the draws find one, else as without."""
+    if prefer is not None:
+        found = _draw(rng, lanes, sample_free, clear, lambda x, y: ok(x, y) and prefer(x, y), edge)
+        if found is not None:
+            return found
     for _ in range(SPAWN_TRIES):
         if lanes is not None:
             x, y, _ = lanes.random_point(rng, PERSON_RADIUS_M + 0.1, edge)
@@ -149,7 +171,11 @@ def _group(
     places: list[tuple[float, float, float]],
     clear: Callable[[float, float, float], bool],
     far: Callable[[float, float], bool],
+    off_places: Callable[[float, float], bool],
 ) -> list[PersonState]:
+    """A group of ``size`` standing in a ring beyond one of ``places`` (off the others where
+    the floor allows); [] when there is no room for one."""
+    fallback = None
     for _ in range(SPAWN_TRIES):
         px, py, facing = places[int(rng.integers(len(places)))]
         # Beyond the place as one arrives (places face into their rooms): not in the doorway.
@@ -157,9 +183,14 @@ def _group(
         r = float(rng.uniform(*GROUP_FROM_PLACE_M))
         cx, cy = px + r * math.cos(a), py + r * math.sin(a)
         if clear(cx, cy, GROUP_RING_M + PERSON_RADIUS_M + 0.1) and far(cx, cy):
-            break
+            if all(off_places(cx + GROUP_RING_M * math.cos(a + 2 * math.pi * j / size),
+                              cy + GROUP_RING_M * math.sin(a + 2 * math.pi * j / size)) for j in range(size)):
+                break
+            fallback = fallback or (a, cx, cy)  # on a small floor: by a place, if nowhere else
     else:
-        raise ConfigError("could not find room for a group of simulated people")
+        if fallback is None:  # no room for a standing group (a floor 1.45 m between pillars)
+            return []
+        a, cx, cy = fallback
     out = []
     for j in range(size):
         b = a + 2 * math.pi * j / size
