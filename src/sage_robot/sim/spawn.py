@@ -173,8 +173,8 @@ def _group(
     far: Callable[[float, float], bool],
     off_places: Callable[[float, float], bool],
 ) -> list[PersonState]:
-    """A group of ``size`` standing in a ring beyond one of ``places`` (off the others where
-    the floor allows); [] when there is no room for one."""
+    """A group of ``size`` standing in a ring beyond one of ``places``, every member off every
+    place where the floor allows; [] when there is no room for one."""
     fallback = None
     for _ in range(SPAWN_TRIES):
         px, py, facing = places[int(rng.integers(len(places)))]
