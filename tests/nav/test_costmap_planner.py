@@ -231,3 +231,29 @@ def test_a_squeeze_is_planned_through_only_when_there_is_no_other_way() -> None:
     at_wall = squeezed.points[np.abs(squeezed.points[:, 0] - 5.0) < 0.1]
     assert len(at_wall)
     assert (np.abs(at_wall[:, 1] - 3.0) < 0.05).all()
+
+
+def test_a_plan_keeps_out_of_what_the_controllers_window_finds_impassable() -> None:
+    """The global costmap and the controller's rolling window can disagree about an obstacle's
+    pad (it depends on the marks around it, and the global costmap remembers more of them:
+    willow-2010, issue #20, a box hard-padded in the window and soft-padded globally). Plans
+    made with ``impassable_as(window)`` keep out of every cell the window finds impassable,
+    and the global costmap is as it was afterwards."""
+    grid = room(10.0, 6.0, resolution=0.05)
+    cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0)
+    window = cm.window(5.0, 3.0, 4.0)
+    window.obstacles[window.geom.to_cell(5.0, 3.0)] = True  # a return the global costmap lacks
+    window.refresh()
+    before = cm.cost.copy()
+    def in_window(points: np.ndarray) -> np.ndarray:
+        cost = window.cost_at(points[:, 0], points[:, 1])
+        return cost[cost != NO_INFORMATION]  # (outside the window)
+
+    with cm.impassable_as(window):
+        p = plan(cm, (2.0, 3.0), (8.0, 3.0))
+        assert (in_window(p.points) < INSCRIBED).all()
+    assert (cm.cost == before).all()
+    straight = plan(cm, (2.0, 3.0), (8.0, 3.0))  # without the window's view: straight through
+    assert (in_window(straight.points) >= INSCRIBED).any()
+    with cm.impassable_as(None):
+        assert plan(cm, (2.0, 3.0), (8.0, 3.0)).length_m == pytest.approx(straight.length_m)

@@ -20,7 +20,9 @@ Conventions
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -352,6 +354,32 @@ class Costmap:
         r0, c0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
         self.obstacles[r0:max(int(hi[0]) + 1, 0), c0:max(int(hi[1]) + 1, 0)] = False
         self.refresh()
+
+    @contextlib.contextmanager
+    def impassable_as(self, local: Costmap | None) -> Iterator[None]:
+        """For the block's duration, the cells ``local`` (the controller's rolling window, cut
+        from this costmap's grid) finds impassable are impassable here too, so a plan never runs
+        where the controller will stop. The two can disagree: the pad of what the scan marks
+        depends on the marks around it, and this costmap remembers more of them than the live
+        window (issue #20: on willow-2010 a box counted as a person, hard-padded, in the window
+        and as a box, soft-padded, here; every plan ran through its pad, and the robot stopped
+        there for good)."""
+        if local is None:
+            yield
+            return
+        rr, cc = np.nonzero((local.cost >= INSCRIBED) & (local.cost != NO_INFORMATION))
+        xs, ys = local.geom.to_world(rr, cc)
+        r, c = self.geom.to_cell(xs, ys)
+        ok = self.geom.inside(r, c)
+        r, c = r[ok], c[ok]
+        free = self.cost[r, c] < INSCRIBED
+        r, c = r[free], c[free]
+        saved = self.cost[r, c].copy()
+        self.cost[r, c] = INSCRIBED
+        try:
+            yield
+        finally:
+            self.cost[r, c] = saved
 
     def clear_obstacles(self) -> None:
         """Nav2's clear-costmap recovery: forget everything the scans marked."""

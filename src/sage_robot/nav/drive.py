@@ -163,6 +163,7 @@ class GoalRun:
         node, start = self.node, self.pose()
         goal = self.target.pose[:2]
         scan = node.scan  # the job's inputs are taken here, not read from the node in the thread
+        local = node.local_cm
         tracks = self.social.snapshot()
 
         def work() -> Plan:
@@ -170,7 +171,8 @@ class GoalRun:
             if with_obstacles:
                 node.refresh_global(start, scan)
                 try:
-                    return self.social.plan(cm, start[:2], goal, tracks)
+                    with cm.impassable_as(local):  # never through what the controller stops at
+                        return self.social.plan(cm, start[:2], goal, tracks)
                 except NoPath:
                     if not cm.blocked(np.array([goal]))[0]:
                         raise
