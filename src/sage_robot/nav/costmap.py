@@ -358,12 +358,11 @@ class Costmap:
     @contextlib.contextmanager
     def impassable_as(self, local: Costmap | None) -> Iterator[None]:
         """For the block's duration, the cells ``local`` (the controller's rolling window, cut
-        from this costmap's grid) finds impassable are impassable here too, so a plan never runs
-        where the controller will stop. The two can disagree: the pad of what the scan marks
+        from this costmap's grid) finds impassable are impassable here too, so a plan does not
+        run where the controller will stop. The two can disagree: the pad of what the scan marks
         depends on the marks around it, and this costmap remembers more of them than the live
-        window (issue #20: on willow-2010 a box counted as a person, hard-padded, in the window
-        and as a box, soft-padded, here; every plan ran through its pad, and the robot stopped
-        there for good)."""
+        window (issue #20, willow-2010: a box's impassable zone reached two cells further in
+        the window than here, where the robot stood stopped beside it)."""
         if local is None:
             yield
             return
