@@ -8,11 +8,6 @@ does: a command whose next control period would bring the body within ``MARGIN_M
 return, and closer to it than now, has its forward speed cut to zero (turning in place stays
 allowed: the body is a circle). Returns inside the body are the robot itself and are ignored.
 
-A lidar at knee height sees a person's legs, not the body around them: returns that form a
-small cluster (no wider than ``LEG_SIZED_M``, apart from the others by ``CLUSTER_GAP_M``) are
-kept ``LEGS_MARGIN_M`` away instead (issue #20: in the sandbox the robot, creeping at 0.15 m/s
-with 2 cm to a person's legs, touched the body around them).
-
 Robot frame (base_link): x ahead, y left, metres; (v m/s, w rad/s).
 """
 
@@ -25,9 +20,6 @@ import numpy as np
 MARGIN_M = 0.02  # the body keeps at least this much from any scan return while moving toward it
 LOOKAHEAD_S = 0.1  # how far ahead the body is projected (two 20 Hz control periods)
 SELF_FRACTION = 0.8  # returns nearer the centre than this share of the radius are the robot itself
-CLUSTER_GAP_M = 0.06  # neighbouring returns further apart than this belong to different things (m)
-LEG_SIZED_M = 0.25  # a cluster no wider than this may be a leg (m)
-LEGS_MARGIN_M = 0.1  # ... and is kept this far away: the body reaches beyond the legs (m)
 
 
 def scan_points(angles: np.ndarray, ranges: np.ndarray, range_max: float,
@@ -49,29 +41,13 @@ def guarded(v: float, w: float, points: np.ndarray, radius_m: float,
     outside = d0 >= SELF_FRACTION * radius_m
     if not outside.any():
         return v
-    margin = margins(points)
-    pts, d0, margin = points[outside], d0[outside], margin[outside]
+    pts, d0 = points[outside], d0[outside]
     th = w * lookahead_s
     if abs(w) < 1e-9:
         x, y = v * lookahead_s, 0.0
     else:
         x, y = v / w * math.sin(th), v / w * (1.0 - math.cos(th))
     d1 = np.hypot(pts[:, 0] - x, pts[:, 1] - y)
-    if np.any((d1 < radius_m + margin) & (d1 < d0)):
+    if np.any((d1 < radius_m + MARGIN_M) & (d1 < d0)):
         return 0.0
     return v
-
-
-def margins(points: np.ndarray) -> np.ndarray:
-    """How far the body keeps from each return (in scan order): LEGS_MARGIN_M for those in a
-    small cluster (legs, a person), MARGIN_M for the rest (walls, furniture)."""
-    out = np.full(len(points), MARGIN_M)
-    if len(points) == 0:
-        return out
-    gaps = np.hypot(*np.diff(points, axis=0).T) > CLUSTER_GAP_M
-    starts = np.concatenate([[0], np.flatnonzero(gaps) + 1])
-    lo_x, hi_x = np.minimum.reduceat(points[:, 0], starts), np.maximum.reduceat(points[:, 0], starts)
-    lo_y, hi_y = np.minimum.reduceat(points[:, 1], starts), np.maximum.reduceat(points[:, 1], starts)
-    small = np.hypot(hi_x - lo_x, hi_y - lo_y) <= LEG_SIZED_M
-    sizes = np.diff(np.concatenate([starts, [len(points)]]))
-    return np.where(np.repeat(small, sizes), LEGS_MARGIN_M, out)
