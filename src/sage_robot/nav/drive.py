@@ -131,7 +131,6 @@ class GoalRun:
         self._waited_s = 0.0  # waited for people since the ladder last reset (s)
         self._asked_at = -math.inf  # when "excuse me" was last said on this goal (clock s)
         self._cleared = False  # the last wait ended because the path looked free
-        self._cleared_at = 0.0  # ... when (clock s)
         self._first_blockers: np.ndarray | None = None  # what blocked the path at the wait's first look
         self._blocker_moved = False  # ... and whether it has moved since
         self._blocker_sizes: list[float] = []  # sizes (m) of the blobs on the path at the latest look
@@ -308,14 +307,10 @@ class GoalRun:
         pose = self.pose()
         self._level_xy = (pose[0], pose[1])
         level, self._level = self._level, self._level + 1
-        if level == 2 and self._cleared:
+        if level == 2 and self._cleared and self._waited_s < self.node.settings.nav.people_wait_s:
             # the path looked free, yet the robot was stopped again before it got anywhere (the
-            # person is still close ahead): go on waiting with what is left of the time; the time
-            # since it looked free counts too (held again and again by the collision guard, the
-            # robot used to cycle here, 0.5 s of waiting a time, until the goal timed out)
-            self._waited_s += max(0.0, self.clock.now() - self._cleared_at)
-            if self._waited_s < self.node.settings.nav.people_wait_s:
-                level, self._level = 1, 2
+            # person is still close ahead): go on waiting with what is left of the time
+            level, self._level = 1, 2
         if level >= 2:  # people were waited for and did not leave: settle if the goal is right there
             note = await self._settle_note(pose)
             if note:
@@ -418,7 +413,7 @@ class GoalRun:
             if await self.clock.offload(self._path_free, intended.points, self.node.pose(),
                                         self.node.scan, self.node.local_cm):
                 node.event("path_clear", "thank you", place=self.target.name)
-                self._cleared, self._cleared_at = True, self.clock.now()
+                self._cleared = True
                 return
 
     def _path_free(self, points: np.ndarray, pose: tuple[float, float, float] | None, scan: Any,
