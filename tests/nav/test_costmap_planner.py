@@ -213,26 +213,6 @@ def test_a_plan_from_the_edge_of_unexplored_space_goes_round_the_walls() -> None
     assert p.length_m > 5.0  # round an end of the wall, not the 2.35 m straight line through it
 
 
-def test_a_squeeze_is_planned_through_only_when_there_is_no_other_way() -> None:
-    """A gap 3 cm wider than the robot (the TurtleBot sandbox: a pillar 0.53 m from its wall,
-    issue #20) leaves the controller's arcs no room: the robot stopped there for good while a
-    wider way round was free. The planner keeps SQUEEZE_MARGIN_M beyond the inscribed radius
-    where it can, and takes the squeeze when nothing else is left."""
-    grid = room(10.0, 12.0, resolution=0.05)
-    fill(grid, 4.95, 0.0, 5.05, 2.725)  # a thin wall across the room: a 0.55 m squeeze at y 2.725..3.275
-    fill(grid, 4.95, 3.275, 5.05, 10.5)  # ... and a 1.5 m way round at y 10.5..12, 11 m longer
-    cm = Costmap.from_grid(grid, 0.25, 0.55, 3.0)
-    p = plan(cm, (2.0, 3.0), (8.0, 3.0))
-    at_wall = p.points[np.abs(p.points[:, 0] - 5.0) < 0.1]
-    assert len(at_wall)
-    assert (at_wall[:, 1] > 10.5).all(), "the path took the squeeze with a wide way free"
-    fill(grid, 4.95, 10.5, 5.05, 12.0)  # the wide way closed: the squeeze is the only way
-    squeezed = plan(Costmap.from_grid(grid, 0.25, 0.55, 3.0), (2.0, 3.0), (8.0, 3.0))
-    at_wall = squeezed.points[np.abs(squeezed.points[:, 0] - 5.0) < 0.1]
-    assert len(at_wall)
-    assert (np.abs(at_wall[:, 1] - 3.0) < 0.05).all()
-
-
 def test_a_plan_keeps_out_of_what_the_controllers_window_finds_impassable() -> None:
     """The global costmap and the controller's rolling window can disagree about an obstacle's
     pad (it depends on the marks around it, and the global costmap remembers more of them:

@@ -37,11 +37,6 @@ GOAL_SEARCH_RADIUS_M = 0.3  # a goal inside an inflated cell moves to the neares
 # each step through one weighs NARROW_WEIGHT more, about 0.5 m of detour per 5 cm cell.
 NARROW_MARGIN_M = 0.1
 NARROW_WEIGHT = 10.0
-# Where the path would keep less than this beyond the inscribed radius (a gap at most 6 cm wider
-# than the robot), the controller's arcs, a few millimetres off the path, touch the inscribed zone
-# and stop the robot for good (issue #20: a pillar 0.52 m from the TurtleBot sandbox's wall). Such
-# squeezes are planned through only when there is no other way.
-SQUEEZE_MARGIN_M = 0.03
 # A robot that stands in unexplored space (a SLAM map's unknown patch the controller cut
 # through: measured on willow-2010, where every later goal failed "boxed in") plans its way out
 # over at most this much of it, on cells its body fits in, at the step weight of a narrow gap.
@@ -91,21 +86,14 @@ def narrow_cost(costmap: Costmap) -> int:
     return int(MAX_NON_OBSTACLE * math.exp(-costmap.cost_scaling * NARROW_MARGIN_M))
 
 
-def squeeze_cost(costmap: Costmap) -> int:
-    """The inflation cost at ``SQUEEZE_MARGIN_M`` beyond the inscribed radius."""
-    return int(MAX_NON_OBSTACLE * math.exp(-costmap.cost_scaling * SQUEEZE_MARGIN_M))
-
-
-def weights_from_cost(cost: np.ndarray, narrow: int = MAX_NON_OBSTACLE,
-                      passable: int = MAX_NON_OBSTACLE) -> np.ndarray:
+def weights_from_cost(cost: np.ndarray, narrow: int = MAX_NON_OBSTACLE) -> np.ndarray:
     """Step weights: ``1 + COST_WEIGHT * cost / 252``, plus ``NARROW_WEIGHT`` on cells costlier
-    than ``narrow`` (a gap the robot barely fits: a last resort); cells costlier than
-    ``passable`` (at most the inscribed ones) impassable."""
+    than ``narrow`` (a gap the robot barely fits: a last resort), inscribed cells impassable."""
     w: np.ndarray = (
         1.0 + COST_WEIGHT * np.minimum(cost, MAX_NON_OBSTACLE).astype(np.float32) / MAX_NON_OBSTACLE
     )
     w[cost > narrow] += NARROW_WEIGHT
-    w[cost > min(passable, MAX_NON_OBSTACLE)] = np.inf
+    w[cost >= INSCRIBED] = np.inf
     return w.astype(np.float32)
 
 
@@ -205,7 +193,7 @@ def _pool_min(cost: np.ndarray, f: int) -> np.ndarray:
 
 
 def _fine_in_band(costmap: Costmap, cells: np.ndarray, f: int, start: tuple[float, float],
-                  goal: tuple[float, float], passable: int) -> np.ndarray | None:
+                  goal: tuple[float, float]) -> np.ndarray | None:
     """The fine-grid path from ``start`` to ``goal`` within ``BAND_M`` of a coarse path
     (``cells``, planning cells of ``f`` fine cells); None when there is none."""
     g = costmap.geom
@@ -221,7 +209,7 @@ def _fine_in_band(costmap: Costmap, cells: np.ndarray, f: int, start: tuple[floa
             ok = (rr >= 0) & (rr < band.shape[0]) & (cc >= 0) & (cc < band.shape[1])
             band[rr[ok], cc[ok]] = True
     band = ndimage.binary_dilation(band, iterations=k)
-    weights = weights_from_cost(costmap.cost[r0:r1, c0:c1], narrow_cost(costmap), passable)
+    weights = weights_from_cost(costmap.cost[r0:r1, c0:c1], narrow_cost(costmap))
     weights[~band] = np.inf
     radius = max(1, round(GOAL_SEARCH_RADIUS_M / g.resolution))
 
@@ -275,19 +263,8 @@ def _start_cell(costmap: Costmap, weights: np.ndarray, start: tuple[float, float
 
 
 def plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float],
-         max_cells: int = MAX_FINE_CELLS) -> Plan:
-    """A smoothed path from ``start`` to ``goal`` (map frame, m), keeping ``SQUEEZE_MARGIN_M``
-    beyond the inscribed radius, or through a squeeze where there is no other way. Raises
-    :class:`NoPath`."""
-    try:
-        return _plan(costmap, start, goal, max_cells, passable=squeeze_cost(costmap))
-    except NoPath:
-        return _plan(costmap, start, goal, max_cells, passable=MAX_NON_OBSTACLE)
-
-
-def _plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float], max_cells: int,
-          fine_fallback: bool = True, open_pool: bool = True, passable: int = MAX_NON_OBSTACLE) -> Plan:
-    """A smoothed path from ``start`` to ``goal`` on cells no costlier than ``passable``.
+         max_cells: int = MAX_FINE_CELLS, fine_fallback: bool = True, open_pool: bool = True) -> Plan:
+    """A smoothed path from ``start`` to ``goal`` (map frame, m). Raises :class:`NoPath`.
 
     On a coarse grid a planning cell that some fine cell inside makes passable stays passable
     (at the highest non-lethal cost), so pooling never closes a gap the fine grid has open;
@@ -301,7 +278,7 @@ def _plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float
     if factor > 1 and open_pool:
         rescued = (_pool_min(costmap.cost, factor) < INSCRIBED) & (cost >= INSCRIBED)
         cost = np.where(rescued, np.uint8(MAX_NON_OBSTACLE), cost)
-    weights = weights_from_cost(cost, narrow_cost(costmap), passable)
+    weights = weights_from_cost(cost, narrow_cost(costmap))
     res = g.resolution * factor
     radius = max(1, round(GOAL_SEARCH_RADIUS_M / res))
 
@@ -310,16 +287,16 @@ def _plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float
 
     if factor > 1 and _nearest_free(weights, cell(start), radius + 1) is None:
         # standing in unexplored space? its way out is found on the fine grid
-        return _plan(costmap, start, goal, costmap.cost.size, fine_fallback=False, passable=passable)
+        return plan(costmap, start, goal, max_cells=costmap.cost.size, fine_fallback=False)
     s, escaping, weights = _start_cell(costmap, weights, start, cell(start), radius + 1)
     gl = _nearest_free(weights, cell(goal), radius)
     if gl is None:
         raise NoPath("the goal is inside an obstacle or outside the map")
     cells = _search(weights, s, gl)
     if cells is not None and rescued is not None and rescued[cells[:, 0], cells[:, 1]].any():
-        fine = _fine_in_band(costmap, cells, factor, start, goal, passable)
+        fine = _fine_in_band(costmap, cells, factor, start, goal)
         if fine is None:  # the pooled gap was no gap: plan as before on the strict coarse grid
-            return _plan(costmap, start, goal, max_cells, fine_fallback, open_pool=False, passable=passable)
+            return plan(costmap, start, goal, max_cells, fine_fallback, open_pool=False)
         fine[0] = start
         if math.hypot(goal[0] - fine[-1, 0], goal[1] - fine[-1, 1]) <= GOAL_SEARCH_RADIUS_M + g.resolution:
             fine[-1] = goal
@@ -330,7 +307,7 @@ def _plan(costmap: Costmap, start: tuple[float, float], goal: tuple[float, float
             raise NoPath(BOXED_IN)
         if factor > 1 and fine_fallback:
             # a gap narrower than a coarse cell may still be passable: search the fine grid
-            return _plan(costmap, start, goal, costmap.cost.size, fine_fallback=False, passable=passable)
+            return plan(costmap, start, goal, max_cells=costmap.cost.size, fine_fallback=False)
         raise NoPath("no free way to the goal")
     xs = g.origin_x + (cells[:, 1] + 0.5) * res
     ys = g.origin_y + (cells[:, 0] + 0.5) * res
