@@ -1,12 +1,14 @@
 """Train the ``hey_jarvis_noise`` wake head (src/sage_robot/data/wake/hey_jarvis_noise.npz).
 
     .venv/bin/pip install -e '.[wake-train]'   # scikit-learn, for the regression
-    .venv/bin/python scripts/train_wake_head.py [--out PATH] [--workers 2]
+    .venv/bin/python scripts/train_wake_head.py [--out PATH] [--workers 2] [--windows W.npz]
 
-Several minutes on 2 idle cores (48 min for the bundled head, on a heavily shared
-machine). Meant to be deterministic: every random stream is seeded, Piper's random
-prosody by ``onnxruntime.set_seed`` before each part's voice loads (a second run giving
-the same weights was not re-checked after that was added).
+About 25 min on 2 cores (17 min for the windows of ``make_part``, 8 for the near misses);
+``--windows`` keeps them, and a second run with the same file only refits (under a
+minute; the bundled head was refitted so, to 3e-8 of the weights of the fit it was chosen
+by). Meant to be deterministic: every random stream is seeded, Piper's random prosody by
+``onnxruntime.set_seed`` before each part's voice loads; the windows of a second run
+reproduced the bundled head's earlier weights to 0.012 (not bit for bit).
 
 The head is a logistic regression on openWakeWord's 16 x 96 speech-embedding window
 (the window the bundled ``hey_jarvis`` model scores), trained to hear "hey Jarvis" in
@@ -27,7 +29,12 @@ from every evaluation set:
   (espeak-ng and Piper voices) that includes a confusable; one talker in the babble of
   others; noise alone; the noise before each positive phrase. (Issue #22: the babble of
   Piper talkers reached 0.77-0.86 with the gate open in ``sage bench voice``, against the
-  head's 0.9 threshold; these negatives widen that margin.)
+  head's 0.9 threshold; these negatives widen that margin.) Near misses (:data:`NEAR_MISSES`:
+  "jars", "Harvey", "Marvin", "starving", "Hey, ..."), each said with one to three other
+  talkers starting together, or after a "Hey, ..." sentence and a short pause.
+- The fit leaves out positives below ``MIN_FIT_SNR_DB`` (3 dB): with them the head fired
+  on the bench's babble of "Jars of paint ..." at 0.92 (issue #22; docs/benchmarks.md,
+  "the wake head retrained").
 """
 
 from __future__ import annotations
@@ -72,12 +79,27 @@ CONFUSABLE = ("Hey Travis, wait for me.", "Hey Marvin!", "Harvey, come here.",
 LABEL_SCORE = 0.5  # clean-rendering frames the bundled model scores this high are positives
 NOISY_COPIES = 4
 SNR_DB = (-2.0, 20.0)
-C_REGULARISATION = 0.002  # inverse L2 strength of the logistic regression
+C_REGULARISATION = 0.05  # inverse L2 strength of the logistic regression
+# Positives noisier than this are made (their noise-only lead-ins are negatives) but left out
+# of the fit: with them the head learned to fire on "jar..." in babble (issue #22, the margin).
+MIN_FIT_SNR_DB = 3.0
 PIPER_TALKER_SHARE = 0.5  # negatives and babble talkers in Piper's (random-prosody) voice
 PIPER_NEG_SPEEDS = (0.8, 1.35)  # length scales of those
 BABBLES = 40  # babble negatives per part (three talkers, one confusable)
 FOREGROUND_IN_BABBLE = 16  # negatives per part: one talker over the babble of others
 BABBLE_FG_SNR_DB = (0.0, 12.0)
+# Near misses: words that share "jar", "arv" or "hey" with the wake phrase (none of them is a
+# sentence of `sage bench voice`). Issue #22: the bench's babble with "Jars of ..." and a
+# "Hey, ..." sentence before it reached the head's threshold.
+NEAR_MISSES = ("Jars of honey sit on the top shelf.", "The jar is empty.", "Put the jars back, please.",
+               "Harvey wrote the report.", "Ask Harvard about it.", "Marvin is late again.",
+               "Jasper and Travis left early.", "We are starving, is lunch ready?", "Davis carved the sign.",
+               "Mavis, the service desk is closed.", "That jargon is hard to follow.", "Java is a language.",
+               "Garvey parked the car.", "Nervous visitors wait here.", "Hey, this jar is heavy.",
+               "Hey there, Jasmine!", "Hey, have you seen Marvin?", "Hey, are you starving too?",
+               "Purvis and Jarrett are in the lab.", "A jar of marbles is on the bench.")  # fmt: skip
+HARD_MIXES = 48  # per part: a near miss among other talkers who start with it
+HARD_SEQUENCES = 24  # per part: a "Hey, ..." sentence, a short pause, then a near miss
 
 
 class Maker:
@@ -162,8 +184,11 @@ class Maker:
             feats[i] = self.engine.features()
         return feats, scores
 
-    def positives(self, sources: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray], int]:
-        pos, neg, kept = [], [], 0
+    def positives(
+        self, sources: list[np.ndarray]
+    ) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray], int]:
+        """(positive windows, their SNR in dB (inf: clean), negative windows, renderings kept)."""
+        pos, snrs, neg, kept = [], [], [], 0
         for pcm in sources:
             lead = int(self.rng.uniform(0.3, 1.5) * RATE)
             clean = np.concatenate([np.zeros(lead), pcm, np.zeros(int(0.6 * RATE))])
@@ -173,15 +198,17 @@ class Maker:
                 continue
             kept += 1
             pos.append(feats[label])
+            snrs.append(np.full(int(label.sum()), np.inf))
             sig = float(np.sqrt(np.mean(pcm**2)))
             for _ in range(NOISY_COPIES):
                 snr = self.rng.uniform(*SNR_DB)
                 gain = self.rng.uniform(0.3, 1.5)
                 feats, _s = self.windows(gain * (clean + self.noise(len(clean)) * sig / 10 ** (snr / 20)))
                 pos.append(feats[label])
+                snrs.append(np.full(int(label.sum()), snr))
                 if lead // FRAME > 2:  # windows ending before the phrase: noise only
                     neg.append(feats[2 : lead // FRAME])
-        return pos, neg, kept
+        return pos, snrs, neg, kept
 
     def negatives(self, texts: list[str], babbles: int, noises: int) -> list[np.ndarray]:
         neg = []
@@ -229,6 +256,35 @@ class Maker:
             neg.append(self.windows(x + bab)[0][2:])
         return neg
 
+    def near_misses(self, mixes: int, sequences: int) -> list[np.ndarray]:
+        """Negatives that come closest to the wake phrase: a near miss (:data:`NEAR_MISSES`)
+        said with one to three other talkers who start within 0.3 s of it (as a group talks),
+        each at 0.3-0.6 gain; and a "Hey, ..." sentence, 0.2-0.8 s of pause, then a near miss,
+        in two voices, alone or in noise."""
+        neg = []
+        for _ in range(mixes):
+            n = 4 * RATE
+            x = np.zeros(n)
+            said = [NEAR_MISSES[int(self.rng.integers(len(NEAR_MISSES)))]]
+            others = int(self.rng.integers(1, 4))
+            said += [self.sentences[i] for i in self.rng.choice(len(self.sentences), others)]
+            for text in said:
+                off = int(self.rng.integers(0, int(0.3 * RATE)))
+                seg = self.talker(text)[: n - off]
+                x[off : off + len(seg)] += seg * self.rng.uniform(0.3, 0.6)
+            neg.append(self.windows(x)[0][2:])
+        hey = [t for t in CONFUSABLE + NEAR_MISSES if t.startswith("Hey")]
+        for _ in range(sequences):
+            first = self.talker(hey[int(self.rng.integers(len(hey)))])
+            second = self.talker(NEAR_MISSES[int(self.rng.integers(len(NEAR_MISSES)))])
+            gap = np.zeros(int(self.rng.uniform(0.2, 0.8) * RATE))
+            x = np.concatenate([np.zeros(RATE // 2), first, gap, second, np.zeros(RATE // 2)])
+            if self.rng.random() < 0.5:
+                sig = float(np.sqrt(np.mean(second**2)))
+                x = x + self.noise(len(x)) * sig / 10 ** (self.rng.uniform(0, 20) / 20)
+            neg.append(self.windows(x)[0][2:])
+        return neg
+
 
 def kb_sentences() -> list[str]:
     kb = ROOT / "src" / "sage_robot" / "data" / "kb"
@@ -237,8 +293,8 @@ def kb_sentences() -> list[str]:
     return [s.strip() for s in re.split(r"(?<=[.!?])\s+", text) if 3 < len(s.split()) < 30]
 
 
-def make_part(part: int) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """One worker's share: (positive windows, negative windows, renderings kept, tried)."""
+def make_part(part: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, int]:
+    """One worker's share: (positive windows, their SNRs, negative windows, renderings kept, tried)."""
     m = Maker(part)
     jobs = [(v, p) for v in VOICES for p in PHRASES[:3] for _ in range(2)]
     sources = [m.espeak(p, v, int(m.rng.choice(RATES_WPM)), int(m.rng.integers(25, 75)))
@@ -246,10 +302,16 @@ def make_part(part: int) -> tuple[np.ndarray, np.ndarray, int, int]:
     for k, (speed, phrase) in enumerate((s, p) for s in PIPER_SPEEDS for p in PHRASES):
         if k % PARTS == part:
             sources.append(m.piper_say(phrase, speed))
-    pos, neg, kept = m.positives(sources)
+    pos, snrs, neg, kept = m.positives(sources)
     texts = [m.sentences[i] for i in m.rng.choice(len(m.sentences), 20)] + list(CONFUSABLE) * 3
     neg += m.negatives(texts, babbles=BABBLES, noises=6)
-    return np.concatenate(pos), np.concatenate(neg), kept, len(sources)
+    return np.concatenate(pos), np.concatenate(snrs), np.concatenate(neg), kept, len(sources)
+
+
+def make_hard_part(part: int) -> np.ndarray:
+    """One worker's share of the near-miss negatives (its own random stream)."""
+    m = Maker(PARTS + part)
+    return np.concatenate(m.near_misses(HARD_MIXES, HARD_SEQUENCES))
 
 
 def train(pos: np.ndarray, neg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -270,15 +332,27 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=HEADS_DIR / "hey_jarvis_noise.npz")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--windows", type=Path,
+                    help="an .npz of the training windows: written after they are made, or read "
+                         "instead of making them when it exists (to refit without the synthesis)")
     args = ap.parse_args()
     t0 = time.monotonic()
-    with ProcessPoolExecutor(args.workers) as pool:
-        parts = list(pool.map(make_part, range(PARTS)))
-    pos = np.concatenate([p[0] for p in parts])
-    neg = np.concatenate([p[1] for p in parts])
-    kept, tried = sum(p[2] for p in parts), sum(p[3] for p in parts)
-    print(f"renderings kept {kept}/{tried}; windows: {len(pos)} positive, {len(neg)} negative "
-          f"({time.monotonic() - t0:.0f} s)", flush=True)  # fmt: skip
+    if args.windows and args.windows.exists():
+        with np.load(args.windows) as z:
+            pos, neg, kept, tried = z["pos"], z["neg"], int(z["kept"]), int(z["tried"])
+            snrs = z["pos_snr"]
+    else:
+        with ProcessPoolExecutor(args.workers) as pool:
+            parts = list(pool.map(make_part, range(PARTS)))
+            hard = list(pool.map(make_hard_part, range(PARTS)))
+        pos, snrs, neg = (np.concatenate([p[k] for p in parts]) for k in range(3))
+        neg = np.concatenate([neg, *hard])
+        kept, tried = sum(p[3] for p in parts), sum(p[4] for p in parts)
+        if args.windows:
+            np.savez(args.windows, pos=pos, pos_snr=snrs, neg=neg, kept=kept, tried=tried)
+    pos = pos[snrs >= MIN_FIT_SNR_DB]
+    print(f"renderings kept {kept}/{tried}; windows: {len(pos)} positive (>= {MIN_FIT_SNR_DB:g} dB), "
+          f"{len(neg)} negative ({time.monotonic() - t0:.0f} s)", flush=True)  # fmt: skip
     mean, scale, weights, bias = train(pos, neg)
     about = f"{kept} renderings, {len(pos)} positive and {len(neg)} negative windows"
     save_head(args.out, mean, scale, weights, bias, trained_by="scripts/train_wake_head.py", data=about)

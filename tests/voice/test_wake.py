@@ -226,3 +226,15 @@ def test_profile_detector_no_wake_on_neutral_and_noise(models, voice_settings, s
     noisy = add_noise(pcm, 10.0, np.random.default_rng(1))
     found = det.feed(np.concatenate([silence(0.5), noisy, silence(1.0)]))
     assert [d.model for d in found] == ["hey_jarvis"]
+
+
+def test_a_new_detector_does_not_hear_what_an_earlier_one_was_fed(models, voice_settings, say16k):
+    """Pipelines built again on the same loaded models (a restart, the tests) share one
+    engine: the wake word the last detector heard must not wake the next one."""
+    first = WakeDetector.from_settings(models.wake, voice_settings)
+    phrase = np.concatenate([silence(0.5), say16k("Hey Jarvis.")])
+    cut = len(phrase) - FRAME_SAMPLES * 2  # stop just before the first detector would wake
+    assert not first.feed(phrase[:cut])
+    second = WakeDetector.from_settings(models.wake, voice_settings)
+    assert not second.feed(silence(2.0))
+    assert second.max_smoothed["hey_jarvis"] < 0.05

@@ -55,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fa-minutes", type=float, default=10.0, help="minutes of non-wake audio")
     p.add_argument("--quick", action="store_true", help="small sizes (a smoke test)")
     p.add_argument("--seed", type=int, default=0,
-                   help="seeds Piper's prosody noise and the noise of the wake sets (0: the original)")
+                   help="seeds Piper's prosody noise and the noise of the wake sets (0: the original noise)")
     p.add_argument("--wake-only", action="store_true", help="only the wake-word part (no STT, TTS, turns)")
 
 
@@ -232,8 +232,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.voice.node import VoiceModels
     from sage_robot.voice.tts import Speech, make_engine
 
-    if args.seed:
-        onnxruntime.set_seed(args.seed)  # before Piper's session: its prosody noise is seeded
+    onnxruntime.set_seed(args.seed)  # before Piper's session: its prosody noise is seeded (0 too)
     settings = VoiceSettings(tts_deterministic=False)
     out: dict[str, Any] = {"bench": "voice", "seed": args.seed, "cpus": os.cpu_count(),
                            "load_avg_1min": round(os.getloadavg()[0], 1)}  # fmt: skip

@@ -231,6 +231,10 @@ class WakeDetector:
         head_gate: float = DEFAULT_HEAD_GATE,
     ) -> None:
         self.engine, self.threshold, self.refractory_s = engine, threshold, refractory_s
+        # A detector starts on fresh audio: an engine shared with an earlier detector (a
+        # pipeline built again on the same loaded models) still holds that one's last
+        # 1.3 s, and a wake word in it would wake this one at once.
+        engine.reset()
         if denoised is not None and (denoised is engine or set(denoised.names) != set(engine.names)):
             raise ValueError("the denoised path needs its own engine with the same models")
         self.denoised = denoised
