@@ -27,6 +27,7 @@ from sage_robot.nav.slam.node import (
     SLAM_SAVE,
     SlamNode,
     odom_at,
+    slam_config,
 )
 
 from .synth import corridor_loop, loop_path, publish_step, simulate
@@ -98,6 +99,26 @@ def test_sim_slam_profile() -> None:
     }
     assert set(names) - {"slam"} <= {n for n, _ in PROFILES["sim"]}
     assert "slam" in [n for n, _ in PROFILES["slam"]]
+
+
+def test_the_robot_maps_with_the_settings_the_simulation_bench_measures() -> None:
+    """The shipped profile's lidar (an A1M8, 1 % range noise) gets the low-cost lidar settings
+    that ``sage bench slam --sim`` scores; ``range_noise_fraction: 0`` the engine's defaults."""
+    from sage_robot.bench.slam_sim import slam_config as bench_config
+    from sage_robot.nav.slam.engine import SlamConfig
+    from sage_robot.sim.lidar import LidarSpec
+
+    robot = slam_config(load_profile().slam)
+    bench = bench_config(LidarSpec())
+    assert robot.match == bench.match
+    assert robot.match.range_noise_fraction == 0.01
+    for key in ("submap_edge_strides", "calibrate_odometry", "oriented_normals", "map_min_support",
+                "map_normal_neighbours", "drop_small_objects_m"):
+        assert getattr(robot, key) == getattr(bench, key), key
+    survey = slam_config(load_profile(overrides={"slam": {"range_noise_fraction": 0}}).slam)
+    assert survey.match == SlamConfig().match
+    assert survey.submap_edge_strides == ()
+    assert not survey.calibrate_odometry
 
 
 def test_odometry_is_interpolated_at_the_scan_time() -> None:

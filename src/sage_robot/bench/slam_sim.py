@@ -48,10 +48,6 @@ TURN_STEP_RAD = 0.2  # on-the-spot turning between scans (1 rad/s)
 MIN_SEEN_HITS = 3  # a true wall cell counts as seen after this many lidar returns in it
 NAV_CLEARANCE_M = 0.15  # a planned path point this close to a true wall is a failure
 ROUTES = ("corridor", "auto")
-SUBMAP_EDGE_STRIDES = (4, 8, 16, 24)  # scan-to-submap edges (see SlamConfig)
-MAP_NORMAL_NEIGHBOURS = 32  # local-map normals for a lidar with 1 % range noise
-MAP_MIN_SUPPORT = 2  # keyframes that must agree on a local-map point
-SMALL_OBJECT_M = 0.25  # foreground objects this small (legs) are not matched
 
 
 def shipped_map() -> Path:
@@ -74,22 +70,13 @@ def plan_drive(grid: Any, route: str, max_length_m: float | None) -> list[Pose]:
 
 
 def slam_config(spec: Any) -> Any:
-    """SLAM settings for the simulated lidar: its reach and 1 % range noise (far points weigh
-    less, local-map normals fitted over ``MAP_NORMAL_NEIGHBOURS``), people's legs left out of
-    matching (``SMALL_OBJECT_M``), and local-map points kept only where two keyframes agree."""
+    """SLAM settings for the simulated lidar, as the robot's ``slam`` node makes them for its
+    ``slam.range_noise_fraction`` (:func:`sage_robot.nav.slam.tuning.noisy_lidar_config`),
+    with the lidar's reach."""
     from sage_robot.nav.slam.engine import SlamConfig
-    from sage_robot.nav.slam.matcher import MatchConfig
+    from sage_robot.nav.slam.tuning import noisy_lidar_config
 
-    return SlamConfig(
-        max_range_m=spec.range_max_m,
-        submap_edge_strides=SUBMAP_EDGE_STRIDES,
-        calibrate_odometry=True,
-        oriented_normals=True,
-        map_normal_neighbours=MAP_NORMAL_NEIGHBOURS,
-        map_min_support=MAP_MIN_SUPPORT,
-        drop_small_objects_m=SMALL_OBJECT_M,
-        match=MatchConfig(range_noise_fraction=spec.noise_fraction),
-    )
+    return noisy_lidar_config(SlamConfig(max_range_m=spec.range_max_m), spec.noise_fraction)
 
 
 def run_check(

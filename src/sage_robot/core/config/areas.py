@@ -274,5 +274,12 @@ class SlamSettings(Section):
     loop_min_inliers: float = Field(
         0.65, ge=0, le=1, description="Fraction of scan points on the map a loop closure needs (0..1)."
     )
+    range_noise_fraction: float = Field(
+        0.01,
+        ge=0,
+        le=0.2,
+        description="The lidar's range noise, 1 sigma, as a fraction of the range (RPLIDAR A1M8: 0.01); "
+        "> 0 uses the settings for such a lidar (docs/slam.md), 0 the engine's (a survey-grade scanner).",
+    )
     map_period_s: float = Field(1.0, gt=0, description="Publish the growing /map at most this often (s).")
     out_dir: str = Field("", description="Where maps are saved; empty = <state dir>/maps.")

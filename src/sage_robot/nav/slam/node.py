@@ -38,6 +38,7 @@ from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgr
 from sage_robot.nav.slam.occupancy import OccupancyMapper
 from sage_robot.nav.slam.points import Pose, Scan
 from sage_robot.nav.slam.store import save_session
+from sage_robot.nav.slam.tuning import noisy_lidar_config
 
 ODOM_HISTORY = 50  # odometry messages kept to interpolate at scan times (1 s at 50 Hz)
 SLAM_PROGRESS = Topic("/slam/progress", SlamProgress, latched=True)
@@ -176,9 +177,10 @@ def maps_dir(resources: Resources, settings: SlamSettings) -> Path:
 
 
 def slam_config(settings: SlamSettings) -> SlamConfig:
-    """The engine's configuration with the profile's ``slam`` section applied."""
+    """The engine's configuration with the profile's ``slam`` section applied (with range
+    noise, the settings for a low-cost lidar: :mod:`sage_robot.nav.slam.tuning`)."""
     return dataclasses.replace(
-        SlamConfig(),
+        noisy_lidar_config(SlamConfig(), settings.range_noise_fraction),
         max_range_m=settings.max_range_m,
         keyframe_dist_m=settings.keyframe_dist_m,
         keyframe_angle_rad=settings.keyframe_angle_rad,

@@ -1,0 +1,38 @@
+"""SLAM settings for a low-cost lidar with range noise (the seed robot's RPLIDAR A1M8: 1 %).
+
+The engine's defaults (:class:`~sage_robot.nav.slam.engine.SlamConfig`) suit a survey-grade
+scanner (the SICK of the CARMEN logs). With a noisy lidar, long corridors need the fixes of
+issue #23 (``docs/slam.md``, "SLAM in simulation"): scan-to-submap edges, odometry
+calibration, oriented and smoothed map normals, local-map points two keyframes agree on,
+people's legs left out of matching, and pairings weighed by the range noise. The robot's
+``slam`` node (``slam.range_noise_fraction`` > 0) and ``sage bench slam --sim`` both use
+:func:`noisy_lidar_config`, so the benchmark measures what the robot runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from sage_robot.nav.slam.engine import SlamConfig
+
+SUBMAP_EDGE_STRIDES = (4, 8, 16, 24)  # scan-to-submap edges (see SlamConfig)
+MAP_NORMAL_NEIGHBOURS = 32  # local-map normals for a lidar with 1 % range noise
+MAP_MIN_SUPPORT = 2  # keyframes that must agree on a local-map point
+SMALL_OBJECT_M = 0.25  # foreground objects this small (legs) are not matched
+
+
+def noisy_lidar_config(base: SlamConfig, range_noise_fraction: float) -> SlamConfig:
+    """``base`` with the settings for a lidar whose range noise is this fraction of the range
+    (1 sigma); ``base`` itself when it is 0."""
+    if range_noise_fraction <= 0:
+        return base
+    return dataclasses.replace(
+        base,
+        submap_edge_strides=SUBMAP_EDGE_STRIDES,
+        calibrate_odometry=True,
+        oriented_normals=True,
+        map_normal_neighbours=MAP_NORMAL_NEIGHBOURS,
+        map_min_support=MAP_MIN_SUPPORT,
+        drop_small_objects_m=SMALL_OBJECT_M,
+        match=dataclasses.replace(base.match, range_noise_fraction=range_noise_fraction),
+    )
