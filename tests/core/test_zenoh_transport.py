@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import struct
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -23,11 +24,11 @@ from sage_robot.core.clock import WallClock
 from sage_robot.core.config import parse_profile
 from sage_robot.core.config.bus import BusSettings, ZenohSettings
 from sage_robot.core.errors import ConfigError, SageError, ServiceError, ServiceTimeout, ServiceUnavailable
-from sage_robot.core.msgs import LaserScan, Text, Twist
+from sage_robot.core.msgs import BatteryState, LaserScan, Odometry, Pose2D, PowerStatus, Text, Twist
 from sage_robot.core.transport import wire
 from sage_robot.core.transport.keys import check_topic, session_config, topic_key, topic_of
 from sage_robot.core.transport.remote import RemoteRobot
-from sage_robot.core.transport.zenoh_bus import ZenohTransport
+from sage_robot.core.transport.zenoh_bus import ZenohTransport, repeats
 from tests.core.test_msgs import EXAMPLES
 from tests.core.zenoh_peer import HEARD, UPPER, free_port, running_peer, unique_robot
 from tests.support.waits import until
@@ -259,3 +260,51 @@ async def until_value(make_call: Any) -> Any:
             return result[0]
         await asyncio.sleep(0.05)
     raise AssertionError("the peer's service never became reachable")
+
+
+def _odom(stamp: float, x: float = 1.0) -> Odometry:
+    return Odometry(stamp, Pose2D(x, 2.0, 0.5), Twist(0.0, 0.0))
+
+
+def test_a_message_repeats_another_only_when_all_but_its_stamp_is_equal_and_it_is_recent() -> None:
+    assert repeats(_odom(1.05), _odom(1.0), 0.1)
+    assert not repeats(_odom(1.1), _odom(1.0), 0.1)  # due again
+    assert not repeats(_odom(1.05, x=1.001), _odom(1.0), 0.1)  # moved
+    assert not repeats(Twist(0.3, 0.0), Twist(0.3, 0.0), 0.1)  # no stamp: a command always goes
+    nan = BatteryState(1.05, float("nan"), float("nan"), PowerStatus.UNKNOWN)
+    assert not repeats(nan, replace(nan, stamp=1.0), 0.1)  # NaN equals nothing: sent
+    scan = LaserScan(1.05, "laser", 0.0, 0.1, 0.1, 10.0, np.ones(3, np.float32))
+    assert not repeats(scan, replace(scan, stamp=1.0), 0.1)  # arrays are never compared
+
+
+def test_repeat_periods_are_checked() -> None:
+    with pytest.raises(ConfigError, match="repeat_every_s"):
+        parse_profile("bus:\n  zenoh:\n    repeat_every_s: {/odom: 0}\n")
+    assert parse_profile("").bus.zenoh.repeat_every_s["/odom"] == 0.1
+
+
+async def test_an_unchanged_stream_reaches_other_processes_only_every_repeat_period() -> None:
+    robot, port = unique_robot(), free_port()
+    pub_settings = BusSettings(transport="zenoh", robot_id=robot, zenoh=ZenohSettings(
+        listen=(f"tcp/127.0.0.1:{port}",), repeat_every_s={"/odom": 0.1}))  # fmt: skip
+    sender = ZenohTransport(pub_settings)
+    receiver = ZenohTransport(_settings(robot, [], [f"tcp/127.0.0.1:{port}"]))
+    pub_bus, sub_bus = Bus(WallClock(), sender), Bus(WallClock(), receiver)
+    try:
+        far = sub_bus.subscribe(topics.ODOM, Odometry, maxsize=1000)
+        near = pub_bus.subscribe(topics.ODOM, Odometry, maxsize=1000)
+        await until(lambda: sender.matched(topics.ODOM), "the other process subscribed", poll=0.05)
+        for i in range(50):  # a robot at rest: 1 s of 50 Hz odometry, the same pose
+            pub_bus.publish(topics.ODOM, _odom(i * 0.02))
+            await asyncio.sleep(0.002)
+        pub_bus.publish(topics.ODOM, _odom(1.0, x=1.5))  # it moves: sent at once
+        await until(lambda: far.pending() >= 11, "the other process got the stream", poll=0.05,
+                    detail=lambda: f"got {far.pending()}, sent {sender.sent}, held {sender.held_back}")
+        await asyncio.sleep(0.3)  # nothing more is on its way
+        stamps = [round(far.get_nowait().stamp, 2) for _ in range(far.pending())]  # type: ignore[union-attr]
+        assert stamps == [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0]
+        assert near.pending() == 51  # inside the process every message arrives
+        assert sender.held_back == 40
+    finally:
+        sender.close()
+        receiver.close()

@@ -4,12 +4,26 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from sage_robot.core.config.base import Section
 
 DEFAULT_ZENOH_PORT = 7450  # not 7447: Zenoh's router port (rmw_zenohd, the ROS 2 bridge's default)
 ROBOT_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"  # one Zenoh key chunk, no wildcards
+# Zenoh's thread pools (its ZENOH_RUNTIME, RON): receiving, sending, accepting and the network
+# tasks all run on the one 'app' pool, so a message between processes wakes one thread, not three.
+ONE_POOL_RUNTIME = "(rx: (handover: app), acc: (handover: app), tx: (handover: app), net: (handover: app))"
+# Streams that repeat themselves while the robot stands still (odometry, the map->odom
+# correction, localization's verdict, the simulated speaker): a message equal to the last one
+# sent to other processes but for its stamp goes again only after this long (s, of its stamps).
+# Every change goes at once. Odometry keeps 10 Hz for ROS 2 tools' TF lookups.
+MAX_REPEAT_EVERY_S = 5.0  # a held-back stream still says it is alive this often (s)
+DEFAULT_REPEAT_EVERY_S: dict[str, float] = {
+    "/odom": 0.1,
+    "/localization/map_odom": 0.2,
+    "/localization/health": 0.5,
+    "/sim/speaker": 0.5,
+}
 
 
 class ZenohSettings(Section):
@@ -39,6 +53,30 @@ class ZenohSettings(Section):
     open_timeout_s: float = Field(
         2.0, gt=0, le=60, description="How long a tool waits for the robot to answer (s)."
     )
+    repeat_every_s: dict[str, float] = Field(
+        default_factory=lambda: dict(DEFAULT_REPEAT_EVERY_S),
+        description="Topic -> s. A message on the topic equal to the last one sent to other "
+        "processes except for its stamp is sent again only when its stamp is this much newer; "
+        "every change is sent at once, and nothing changes inside a process. Only messages with a "
+        "stamp are ever held back (a /cmd_vel never is). {} sends every message.",
+    )
+    runtime: str = Field(
+        ONE_POOL_RUNTIME,
+        description="Zenoh's thread pools, as its ZENOH_RUNTIME environment variable takes them "
+        "(RON). The default runs them all on one pool: a message between processes wakes one "
+        "thread, not three (docs/benchmarks.md, the robot at rest). '' keeps Zenoh's own pools; "
+        "a ZENOH_RUNTIME set in the environment wins. Read once, by a process's first session.",
+    )
+
+    @field_validator("repeat_every_s")
+    @classmethod
+    def _repeat_periods(cls, periods: dict[str, float]) -> dict[str, float]:
+        for topic, period in periods.items():
+            if not topic.startswith("/") or not 0 < period <= MAX_REPEAT_EVERY_S:
+                raise ValueError(
+                    f"repeat_every_s[{topic!r}]: a topic name and 0 < s <= {MAX_REPEAT_EVERY_S:g}"
+                )
+        return periods
 
 
 class BusSettings(Section):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import atexit
 import json
+import os
 import re
 import threading
 from pathlib import Path
@@ -23,6 +24,7 @@ from sage_robot.core.errors import ConfigError, SageError
 
 TOPIC_NAME = re.compile(r"^(/[A-Za-z0-9_]+)+$")  # ROS names: no wildcards, no empty chunks
 PREFIX = "sage"
+RUNTIME_ENV = "ZENOH_RUNTIME"  # Zenoh reads its thread pools from here, once
 ANY_ADDRESS = re.compile(r"/(0\.0\.0\.0|\[::\]):")  # a listen address a tool cannot connect to
 
 
@@ -68,6 +70,8 @@ def session_config(z: ZenohSettings, listen: list[str] | None, connect: list[str
     listens nowhere and connects to the robot)."""
     import zenoh
 
+    if z.runtime:  # before the process's first session starts Zenoh's pools
+        os.environ.setdefault(RUNTIME_ENV, z.runtime)
     if z.config_file and not Path(z.config_file).is_file():
         raise ConfigError(f"bus.zenoh.config_file: {z.config_file} not found")
     explicit = z.model_fields_set if z.config_file else set(type(z).model_fields)

@@ -24,6 +24,7 @@ import json
 import struct
 import types
 import typing
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -61,9 +62,27 @@ def _json_scalar(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} cannot go on the wire")
 
 
+_PLAIN = (float, int, str, bool, type(None))  # leaves that JSON writes as they are
+
+
+_FIELD_NAMES: dict[type, tuple[str, ...] | None] = {}  # class -> its dataclass fields' names
+
+
+def _field_names(cls: type) -> tuple[str, ...] | None:
+    """A dataclass's field names (looked up once per class), None for any other class."""
+    if cls not in _FIELD_NAMES:
+        fields = dataclasses.fields(cls) if dataclasses.is_dataclass(cls) else None
+        _FIELD_NAMES[cls] = None if fields is None else tuple(f.name for f in fields)
+    return _FIELD_NAMES[cls]
+
+
 def _encode(value: Any, buffers: list[bytes]) -> Any:
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _encode(getattr(value, f.name), buffers) for f in dataclasses.fields(value)}
+    cls = type(value)
+    if cls in _PLAIN:
+        return value
+    names = _field_names(cls)
+    if names is not None:
+        return {name: _encode(getattr(value, name), buffers) for name in names}
     if isinstance(value, np.ndarray):
         if value.dtype.kind not in ARRAY_KINDS:
             raise TypeError(f"arrays of dtype {value.dtype} cannot go on the wire")
@@ -104,7 +123,7 @@ def decode(frame: bytes | memoryview, expected: type | None = None) -> Any:
         raise WireError(f"unknown message type {name!r}")
     if expected is not None and cls is not expected:
         raise WireError(f"expected a {expected.__name__}, got {name}")
-    return _Decoder(buffers).fields(cls, head)
+    return _fields(cls, head, buffers)
 
 
 def _split_buffers(body: memoryview, lengths: Any) -> list[memoryview]:
@@ -125,73 +144,117 @@ def _hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls)
 
 
-class _Decoder:
+Convert = Callable[[Any, list[memoryview]], Any]  # a header value and the frame's buffers -> the field
+
+
+@functools.cache
+def _plan(cls: type) -> tuple[tuple[str, Convert, bool], ...]:
+    """How to decode a message class, worked out once: (field, converter, required) per field."""
+    hints = _hints(cls)
+    return tuple(
+        (f.name, _converter(hints[f.name]),
+         f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
+        for f in dataclasses.fields(cls)
+    )  # fmt: skip
+
+
+def _fields(cls: type, data: Any, buffers: list[memoryview]) -> Any:
     """The header's values as the message's field types, checked like
     :func:`~sage_robot.core.msgs.from_dict` checks JSON (one error naming the field)."""
+    if not isinstance(data, dict):
+        raise WireError(f"{cls.__name__}: expected an object, got {type(data).__name__}")
+    kwargs = {}
+    for name, convert, required in _plan(cls):
+        if name in data:
+            try:
+                kwargs[name] = convert(data[name], buffers)
+            except (TypeError, ValueError, KeyError, IndexError) as exc:
+                raise WireError(f"{cls.__name__}.{name}: {exc}") from None
+        elif required:
+            raise WireError(f"{cls.__name__}: missing field {name!r}")
+    return cls(**kwargs)
 
-    def __init__(self, buffers: list[memoryview]) -> None:
-        self.buffers = buffers
 
-    def fields(self, cls: type, data: Any) -> Any:
-        if not isinstance(data, dict):
-            raise WireError(f"{cls.__name__}: expected an object, got {type(data).__name__}")
-        hints = _hints(cls)
-        kwargs = {}
-        for f in dataclasses.fields(cls):
-            if f.name in data:
-                try:
-                    kwargs[f.name] = self.value(hints[f.name], data[f.name])
-                except (TypeError, ValueError, KeyError, IndexError) as exc:
-                    raise WireError(f"{cls.__name__}.{f.name}: {exc}") from None
-            elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise WireError(f"{cls.__name__}: missing field {f.name!r}")
-        return cls(**kwargs)
+def _converter(tp: Any) -> Convert:
+    """The converter of one field type (checks as :func:`~sage_robot.core.msgs.from_dict`)."""
+    origin = typing.get_origin(tp)
+    if origin is not None:
+        return _generic(origin, typing.get_args(tp))
+    if tp is Any:
+        return lambda v, _b: v
+    scalar = _SCALARS.get(tp)
+    if scalar is not None:
+        return lambda v, _b: scalar(v)
+    if tp is np.ndarray:
+        return _array
+    if tp is bytes:
+        return _bytes
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        return lambda v, _b: tp(v)
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        return lambda v, b: _fields(tp, v, b)  # its plan is made when first needed (nesting)
 
-    def value(self, tp: Any, v: Any) -> Any:
-        origin = typing.get_origin(tp)
-        if origin is not None:
-            return self._generic(origin, typing.get_args(tp), v)
-        if tp is Any:
-            return v
-        scalar = _SCALARS.get(tp)
-        if scalar is not None:
-            return scalar(v)
-        if tp is np.ndarray:
-            return _array(v, self.buffers)
-        if tp is bytes:
-            if not isinstance(v, dict) or not isinstance(v.get("__b__"), int):
-                raise TypeError("expected a bytes reference")
-            return bytes(self.buffers[v["__b__"]])
-        if isinstance(tp, type) and issubclass(tp, enum.Enum):
-            return tp(v)
-        if isinstance(tp, type) and dataclasses.is_dataclass(tp):
-            return self.fields(tp, v)
+    def undecodable(_v: Any, _b: list[memoryview]) -> Any:
         raise TypeError(f"field type {tp} cannot be decoded")
 
-    def _generic(self, origin: Any, args: tuple[Any, ...], v: Any) -> Any:
-        if origin is typing.Union or origin is types.UnionType:
-            if v is None and type(None) in args:
-                return None
-            for arg in args:
-                if arg is not type(None):
-                    try:
-                        return self.value(arg, v)
-                    except (TypeError, ValueError, KeyError):
-                        continue
-            raise ValueError(f"{v!r} matches none of {args}")
-        if not isinstance(v, (list, dict)):
-            raise TypeError(f"expected a list or an object, got {v!r}")
-        if origin is dict:
-            if not isinstance(v, dict):
+    return undecodable
+
+
+def _generic(origin: Any, args: tuple[Any, ...]) -> Convert:
+    if origin is typing.Union or origin is types.UnionType:
+        return _union(args)
+    if origin is dict:
+        item = _converter(args[1])
+
+        def mapping(v: Any, b: list[memoryview]) -> Any:
+            if not isinstance(_sequence(v), dict):
                 raise TypeError(f"expected an object, got {v!r}")
-            return {str(k): self.value(args[1], x) for k, x in v.items()}
-        if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
-            return tuple(self.value(args[0], x) for x in v)
-        if origin is tuple:
-            return tuple(self.value(a, x) for a, x in zip(args, v, strict=True))
-        if origin is list:
-            return [self.value(args[0], x) for x in v]
+            return {str(k): item(x, b) for k, x in v.items()}
+
+        return mapping
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        each = _converter(args[0])
+        return lambda v, b: tuple(each(x, b) for x in _sequence(v))
+    if origin is tuple:
+        parts = [_converter(a) for a in args]
+        return lambda v, b: tuple(c(x, b) for c, x in zip(parts, _sequence(v), strict=True))
+    if origin is list:
+        each = _converter(args[0])
+        return lambda v, b: [each(x, b) for x in _sequence(v)]
+
+    def undecodable(_v: Any, _b: list[memoryview]) -> Any:
         raise TypeError(f"field type {origin} cannot be decoded")
+
+    return undecodable
+
+
+def _union(args: tuple[Any, ...]) -> Convert:
+    may_be_none = type(None) in args
+    options = [_converter(a) for a in args if a is not type(None)]
+
+    def union(v: Any, b: list[memoryview]) -> Any:
+        if v is None and may_be_none:
+            return None
+        for convert in options:
+            try:
+                return convert(v, b)
+            except (TypeError, ValueError, KeyError):
+                continue
+        raise ValueError(f"{v!r} matches none of {args}")
+
+    return union
+
+
+def _sequence(v: Any) -> Any:
+    if not isinstance(v, (list, dict)):
+        raise TypeError(f"expected a list or an object, got {v!r}")
+    return v
+
+
+def _bytes(v: Any, buffers: list[memoryview]) -> bytes:
+    if not isinstance(v, dict) or not isinstance(v.get("__b__"), int):
+        raise TypeError("expected a bytes reference")
+    return bytes(buffers[v["__b__"]])
 
 
 def _float(v: Any) -> float:

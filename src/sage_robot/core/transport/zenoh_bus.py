@@ -21,6 +21,7 @@ publication, checked against the operator password; `sage topic pub`).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hmac
 import json
 import logging
@@ -29,9 +30,11 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from sage_robot.core.bus import Transport
+from sage_robot.core.clock import TIME_EPS_S
 from sage_robot.core.config.bus import BusSettings
 from sage_robot.core.transport import wire
 from sage_robot.core.transport.actions import ZenohActions
@@ -48,6 +51,25 @@ from sage_robot.core.transport.services import Call, ZenohServices
 _log = logging.getLogger("sage.bus.zenoh")
 
 LAST_TIMEOUT_S = 2.0  # how long a late joiner's question for a latched topic's last value stays open
+
+
+def repeats(msg: Any, last: Any, within_s: float) -> bool:
+    """``msg`` equals ``last`` in every field but ``stamp``, and is stamped less than
+    ``within_s`` after it. Messages without a stamp, or with an array, never repeat."""
+    if type(msg) is not type(last) or not dataclasses.is_dataclass(msg):
+        return False
+    stamp, last_stamp = getattr(msg, "stamp", None), getattr(last, "stamp", None)
+    if not isinstance(stamp, float) or not isinstance(last_stamp, float):
+        return False
+    if stamp - last_stamp >= within_s - TIME_EPS_S:
+        return False
+    for f in dataclasses.fields(msg):
+        if f.name == "stamp":
+            continue
+        a, b = getattr(msg, f.name), getattr(last, f.name)
+        if isinstance(a, np.ndarray) or isinstance(b, np.ndarray) or a != b:
+            return False
+    return True
 
 
 def _direct(callback: Callable[[Any], None]) -> Any:
@@ -71,6 +93,9 @@ class ZenohTransport(Transport):
         self._deliver: Callable[[str, Any], None] | None = None
         self._publishers: dict[str, Any] = {}
         self._matched: dict[str, bool] = {}
+        self._repeat_every = dict(z.repeat_every_s)  # topic -> s between unchanged messages sent
+        self._sent_last: dict[str, Any] = {}  # of those topics: the last message sent
+        self.held_back = 0  # unchanged messages not sent (repeat_every_s)
         self._local_only: set[str] = set()  # topics whose messages cannot be encoded
         self._warned: set[str] = set()  # topics a bad frame came in on
         self._last: dict[str, Any] = {}
@@ -109,6 +134,8 @@ class ZenohTransport(Transport):
             if pub is None:
                 return
         if not self._matched.get(topic):
+            return
+        if topic in self._repeat_every and self._hold_back(topic, msg):
             return
         try:
             frame = wire.encode(msg)
@@ -226,6 +253,16 @@ class ZenohTransport(Transport):
             self._declared.append(pub.declare_matching_listener(on_match))
             self._publishers[topic] = pub
         return pub
+
+    def _hold_back(self, topic: str, msg: Any) -> bool:
+        """Whether ``msg`` repeats the last message sent on ``topic`` (all but its stamp) within
+        the topic's ``repeat_every_s``; if not, it becomes the last one sent."""
+        last = self._sent_last.get(topic)
+        if last is not None and repeats(msg, last, self._repeat_every[topic]):
+            self.held_back += 1
+            return True
+        self._sent_last[topic] = msg
+        return False
 
     # ------------------------------------------------------------ from Zenoh's threads
     def _on_any_sample(self, sample: Any) -> None:

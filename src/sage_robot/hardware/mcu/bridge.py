@@ -10,8 +10,10 @@
   profile allows it); a standing non-zero command is re-sent at ``mcu.resend_hz`` so the
   MCU's 550 ms watchdog never trips mid-motion; a stop is sent on zero, on shutdown, and
   when the command grows older than ``mcu.cmd_timeout_s`` (0.25 s by default: the bridge's
-  own dead-man, looked at every :data:`CMD_TIMEOUT_CHECK_S` on a timer of its own, so it
-  does not depend on the web deadman or the navigator being alive).
+  own dead-man, looked at every :data:`CMD_TIMEOUT_CHECK_S` by a watch of its own, so it
+  does not depend on the web deadman or the navigator being alive). At rest (a stop
+  commanded, odometry still) the watch looks every :data:`IDLE_CHECK_S` and a command wakes
+  it at once: an idle robot's motion process wakes 20 times a second, not 100.
 - With a firmware that reports no battery (seed-2025) ``/battery_state`` carries NaN
   (unknown) once a second, so every page, the brain and the watchdog say "unknown".
 - A dedicated RX thread decodes ODOM -> ``/odom``, BATTERY -> ``/battery_state`` (the
@@ -44,6 +46,7 @@ from collections.abc import Callable
 from typing import Any
 
 from sage_robot.core import topics
+from sage_robot.core.clock import TIME_EPS_S
 from sage_robot.core.errors import DeviceNotConnectedError
 from sage_robot.core.msgs import (
     BatteryState,
@@ -58,7 +61,7 @@ from sage_robot.core.msgs import (
 from sage_robot.core.node import Node
 from sage_robot.core.resources import ResourceKey
 from sage_robot.hardware.mcu import protocol as proto
-from sage_robot.hardware.mcu.alignment import AlignmentWatch
+from sage_robot.hardware.mcu.alignment import ODOM_STILL_MPS, ODOM_STILL_RADPS, AlignmentWatch
 from sage_robot.hardware.mcu.convert import (
     ImuCalibrator,
     VoltageSmoother,
@@ -87,9 +90,9 @@ TX_COUNT_RESOURCE = ResourceKey("mcu_tx_bytes", TxCount)
 # Set where the simulated MCU's pty is read by a bridge in another process (process groups):
 # that bridge reads whenever it runs, so the simulator cannot step in lockstep with it.
 PORT_READ_ELSEWHERE = ResourceKey("mcu_port_read_elsewhere", bool)
-CMD_TIMEOUT_CHECK_S = 0.01  # how often the command age is checked (clock s)
+CMD_TIMEOUT_CHECK_S = 0.01  # while commanded or moving: how often the command age is checked (clock s)
+IDLE_CHECK_S = 0.05  # at rest: how often the link and the firmware are looked at (clock s)
 TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
-LINK_CHECK_S = 0.05  # how often the link task looks for a lost port (clock s)
 STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
 SIM_RX_POLL_S = 0.005  # on a simulated clock the port is read in the loop this often (clock s)
 BATTERY_PUBLISH_PERIOD_S = 0.2  # /battery_state at most this often (clock s); firmware may send 50 Hz
@@ -122,7 +125,7 @@ class SerialBridgeNode(Node):
         self._down_logged = False
         self._down_reason = "not opened yet"
         self.command: tuple[float, float] = (0.0, 0.0)
-        self._command_t = self.clock.now()
+        self._command_t = self._written_at = self.clock.now()  # the last command, the last write
         self.counters: Counter[str] = Counter()
         self._rates: dict[str, float] = {}
         self._rate_base: tuple[float, dict[str, int]] = (self.clock.now(), {})
@@ -137,19 +140,17 @@ class SerialBridgeNode(Node):
         self.bus.declare(topics.BATTERY, BatteryState)
         self.bus.declare(topics.IMU, Imu)
         self.bus.declare(topics.MCU_STATUS, DiagnosticStatus)
+        self._wake = asyncio.Event()  # a command for the watch that looks less often at rest
         self.subscribe(topics.CMD_VEL, Twist, self._on_cmd_vel)
-        self.every(1.0 / self.mcu.resend_hz, self._resend, "serial_bridge.resend")
-        # The command's age and the firmware's alignment are watched on a timer of their own
-        # (also with cmd_timeout_s = 0: the alignment watch needs it).
-        self.every(CMD_TIMEOUT_CHECK_S, self._check_timeout, "serial_bridge.cmd_timeout")
         self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
-        self.spawn(self._link_loop(), "serial_bridge.link")
-        if self.clock.is_lockstep:  # no RX thread: reads at fixed simulated times (deterministic)
-            self.every(SIM_RX_POLL_S, self._poll_rx, "serial_bridge.rx")
         self._beat_fd = heartbeat_fd()
         if self._beat_fd is not None:  # run by the supervisor: tell it this bridge is alive
             os.set_blocking(self._beat_fd, False)
-            self.every(HEARTBEAT_PERIOD_S, self._beat, "serial_bridge.heartbeat")
+        # The link, the command's age and re-sending, the firmware's alignment and the
+        # heartbeat are one watch of their own (also with cmd_timeout_s = 0).
+        self.spawn(self._watch_loop(), "serial_bridge.watch")
+        if self.clock.is_lockstep:  # no RX thread: reads at fixed simulated times (deterministic)
+            self.every(SIM_RX_POLL_S, self._poll_rx, "serial_bridge.rx")
 
     async def teardown(self) -> None:
         if getattr(self, "_port", None) is None:
@@ -166,11 +167,35 @@ class SerialBridgeNode(Node):
             self.align.reset()
         self.command, self._command_t = (v, w), self.clock.now()
         self._write(v, w)
+        self._wake.set()
 
-    def _resend(self) -> None:
-        if self.command == (0.0, 0.0) or self._check_timeout():
-            return
-        self._write(*self.command)
+    async def _watch_loop(self) -> None:
+        """Every CMD_TIMEOUT_CHECK_S while the robot is commanded or moving, else every
+        IDLE_CHECK_S or at the next command: the link, the command's age, the re-send of a
+        standing command at ``mcu.resend_hz``, the firmware, the supervisor's heartbeat."""
+        resend_s = 1.0 / self.mcu.resend_hz
+        beat_at = self.clock.now()
+        while True:
+            now = self.clock.now()
+            self._link_step()
+            stopped = self._check_timeout()
+            if not stopped and self.command != (0.0, 0.0) and now - self._written_at >= resend_s - TIME_EPS_S:
+                self._write(*self.command)
+            if self._beat_fd is not None and now >= beat_at - TIME_EPS_S:
+                self._beat()
+                beat_at = max(beat_at + HEARTBEAT_PERIOD_S, now)
+            if self._busy():
+                await self.clock.sleep(CMD_TIMEOUT_CHECK_S)
+                continue
+            self._wake.clear()
+            with contextlib.suppress(asyncio.TimeoutError):
+                await self.clock.wait_for(self._wake.wait(), IDLE_CHECK_S)
+
+    def _busy(self) -> bool:
+        """Commanded, moving, or realigning the firmware: watched closely."""
+        odom = self._odom_twist
+        moving = odom is not None and (abs(odom[0]) > ODOM_STILL_MPS or abs(odom[1]) > ODOM_STILL_RADPS)
+        return self.command != (0.0, 0.0) or moving or self._realign_pending
 
     def _check_timeout(self) -> bool:
         """Stop a command nobody repeats any more; True when it did. Also watches the
@@ -242,19 +267,18 @@ class SerialBridgeNode(Node):
         try:
             self.tx_count.total += port.write(data) or 0
             self.counters["cmd_sent"] += 1
+            self._written_at = self.clock.now()
         except serial.SerialTimeoutException:
             self.counters["write_timeouts"] += 1
         except (serial.SerialException, OSError) as exc:
             self._mark_lost(f"write failed: {exc}")
 
     # ------------------------------------------------------------ link
-    async def _link_loop(self) -> None:
-        while True:
-            if self._lost.is_set():
-                self._on_lost()
-            if self._port is None and self.clock.now() >= self._next_open:
-                self._try_open()
-            await self.clock.sleep(LINK_CHECK_S)
+    def _link_step(self) -> None:
+        if self._lost.is_set():
+            self._on_lost()
+        if self._port is None and self.clock.now() >= self._next_open:
+            self._try_open()
 
     def _try_open(self) -> None:
         self._next_open = self.clock.now() + self.mcu.reconnect_s
@@ -341,7 +365,8 @@ class SerialBridgeNode(Node):
             while not stop.is_set():
                 data = port.read(port.in_waiting or 1)
                 if data:
-                    deliver(data)
+                    waiting = port.in_waiting  # what came with that first byte: one hand-over, not two
+                    deliver(data + port.read(waiting) if waiting else data)
         except Exception as exc:  # SerialException/OSError on unplug; anything else too
             if not stop.is_set():
                 self._mark_lost(f"{type(exc).__name__}: {exc}")
