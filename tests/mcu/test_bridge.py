@@ -18,7 +18,7 @@ from sage_robot.core import topics
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs import Event, Level
 from sage_robot.hardware.mcu import protocol as proto
-from sage_robot.hardware.mcu.bridge import PORT_RESOURCE
+from sage_robot.hardware.mcu.bridge import BATTERY_PUBLISH_PERIOD_S, PORT_RESOURCE
 from sage_robot.sim.firmware import EncoderFaults
 
 from .rig import Rig, close_rig, make_rig
@@ -185,7 +185,7 @@ async def test_bad_frames_on_the_wire_are_counted_and_dropped(rig: Rig):
     before = rig.bridge.stats()
     n_battery = len(rig.battery)
     rig.sim.pty.inject(bad)
-    await rig.run(0.2)
+    await rig.run(BATTERY_PUBLISH_PERIOD_S + 0.1)  # one more /battery_state is due
     await rig.settle()
     after = rig.bridge.stats()
     assert after["bytes_dropped"] - before["bytes_dropped"] == len(bad)

@@ -36,7 +36,6 @@ from sage_robot.app.launcher import HEALTH_TOPIC, Launcher, NodeSpec
 from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import node_class
 from sage_robot.app.runtime import make_transport, run_launcher
-from sage_robot.core import topics
 from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.clock import Clock, SimClock, WallClock
 from sage_robot.core.clock_follow import FollowerClock, publish_clock
@@ -171,7 +170,6 @@ def build_context(args: argparse.Namespace) -> tuple[NodeContext, list[NodeSpec]
     ctx = NodeContext(Bus(clock, make_transport(settings)), clock, settings)
     ctx.resources[SIM_STEP_HOOKS] = []
     ctx.resources[HEALTH_TOPIC] = group_health_topic(args.group)
-    ctx.bus.declare(topics.HEALTH, latched=True)  # the supervisor's merged report (the pages read it)
     if args.mcu_port:
         ctx.resources[PORT_RESOURCE] = args.mcu_port
     if args.export_port:  # the motion group's bridge reads the simulator's pty

@@ -6,9 +6,10 @@ and every other process takes its time from the messages: sleeps and timers wake
 simulator's time passes their deadline. Time never goes backwards (a late or repeated
 message changes nothing).
 
-``/clock`` comes ten times a second, not at every physics step: each message costs every
-process a network wake-up and a turn of its loop (about 0.5 ms here), and at 100 Hz following
-the clock was most of what an idle process spent. A message says how fast the simulator is
+``/clock`` comes five times a second, not at every physics step: each message costs every
+process a network wake-up and a turn of its loop (about 0.5 ms here); at 100 Hz following
+the clock was most of what an idle process spent, and at 10 Hz still a quarter of what the
+processes sent each other at rest. A message says how fast the simulator is
 paced (``speed``); between messages a follower moves its time on at that rate, waking its
 sleepers on a 10 ms grid (:data:`WAKE_GRID_S`), but never further than
 :data:`AHEAD_LIMIT_S` past the last message (a simulator that falls behind, stops or pauses
@@ -32,7 +33,7 @@ from sage_robot.core.bus import Bus, Subscription
 from sage_robot.core.clock import TIME_EPS_S, SimClock
 from sage_robot.core.msgs.clock import SimTime
 
-CLOCK_PERIOD_S = 0.1  # the simulator publishes /clock this often (s, simulated)
+CLOCK_PERIOD_S = 0.2  # the simulator publishes /clock this often (s, simulated)
 AHEAD_LIMIT_S = CLOCK_PERIOD_S  # a follower's time runs at most this far past the last /clock
 WAKE_GRID_S = 0.01  # between messages sleepers wake on this grid (s, simulated): one loop
 #   wake-up serves every timer due within it, as one physics step's /clock used to

@@ -20,6 +20,7 @@ from typing import Any
 
 import uvicorn
 
+from sage_robot.core import topics
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.log import RECENT
 from sage_robot.core.node import Node
@@ -43,6 +44,7 @@ class WebNode(Node):
 
         _keep_recent_logs()
         web = self.settings.web
+        self.bus.declare(topics.HEALTH)  # latched: the launcher's or supervisor's report (/api/health)
         self.hub = Hub(self)
         self.hub.start()
         self.teleop = Teleop(self, self.hub)

@@ -95,7 +95,7 @@ IDLE_CHECK_S = 0.05  # at rest: how often the link and the firmware are looked a
 TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
 STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
 SIM_RX_POLL_S = 0.005  # on a simulated clock the port is read in the loop this often (clock s)
-BATTERY_PUBLISH_PERIOD_S = 0.2  # /battery_state at most this often (clock s); firmware may send 50 Hz
+BATTERY_PUBLISH_PERIOD_S = 1.0  # /battery_state at most this often (clock s; a 30 s average); firmware: 50 Hz
 RX_JOIN_TIMEOUT_S = 1.0  # the RX thread wakes every READ_TIMEOUT_S, so this is ample
 FROM_MCU = frozenset(t.code for t in proto.FRAME_TYPES.values() if t.direction is proto.Direction.FROM_MCU)
 
@@ -173,14 +173,15 @@ class SerialBridgeNode(Node):
         """Every CMD_TIMEOUT_CHECK_S while the robot is commanded or moving, else every
         IDLE_CHECK_S or at the next command: the link, the command's age, the re-send of a
         standing command at ``mcu.resend_hz``, the firmware, the supervisor's heartbeat."""
-        resend_s = 1.0 / self.mcu.resend_hz
         beat_at = self.clock.now()
         while True:
             now = self.clock.now()
-            self._link_step()
-            stopped = self._check_timeout()
-            if not stopped and self.command != (0.0, 0.0) and now - self._written_at >= resend_s - TIME_EPS_S:
-                self._write(*self.command)
+            try:
+                self._watch_turn(now)
+            except Exception as exc:  # the watch stops stale commands: no bug in a job may end it
+                self.counters["watch_errors"] += 1
+                if self._log_due("watch_error"):
+                    self.log.error("serial bridge watch failed; going on", error=repr(exc))
             if self._beat_fd is not None and now >= beat_at - TIME_EPS_S:
                 self._beat()
                 beat_at = max(beat_at + HEARTBEAT_PERIOD_S, now)
@@ -190,6 +191,13 @@ class SerialBridgeNode(Node):
             self._wake.clear()
             with contextlib.suppress(asyncio.TimeoutError):
                 await self.clock.wait_for(self._wake.wait(), IDLE_CHECK_S)
+
+    def _watch_turn(self, now: float) -> None:
+        self._link_step()
+        stopped = self._check_timeout()
+        resend_s = 1.0 / self.mcu.resend_hz
+        if not stopped and self.command != (0.0, 0.0) and now - self._written_at >= resend_s - TIME_EPS_S:
+            self._write(*self.command)
 
     def _busy(self) -> bool:
         """Commanded, moving, or realigning the firmware: watched closely."""
