@@ -36,7 +36,8 @@ from sage_robot.core.msgs.nav import NavState
 from sage_robot.core.node import Node
 
 CLIENT_REPEAT_S = 0.1  # the page re-sends a held command this often (s); documented for pages
-DEADMAN_CHECK_S = 0.02  # how often the deadman (and the e-stop hold) looks (s)
+DEADMAN_CHECK_S = 0.02  # how often the deadman (and the e-stop hold) looks while it has work (s)
+DEADMAN_IDLE_S = 0.1  # with no command standing and no e-stop: this often, or at the next command (s)
 CANCEL_SERVICE_TIMEOUT_S = 1.0  # the e-stop's call of the navigator's cancel service (s)
 ESTOP_RECANCEL_S = 0.5  # while engaged, the cancel service is asked again this often if nav still runs (s)
 NAV_ACTIONS = (topics.NAVIGATE_TO, topics.TOUR)  # what the e-stop cancels
@@ -84,6 +85,7 @@ class Teleop:
             "controls": 0, "deadman_stops": 0, "close_stops": 0, "refused": 0, "estop_cancels": 0,
         }  # fmt: skip
         self._estop_cancel_at = -math.inf  # time.monotonic() of the hold's last cancel-service call
+        self._armed = asyncio.Event()  # a command or the e-stop: the deadman looks closely again
 
     def start(self) -> None:
         self.bus.declare(topics.ESTOP, EStopState, latched=True)
@@ -123,6 +125,7 @@ class Teleop:
         if engaged:
             self._publish(0.0, 0.0)  # the wire first: nothing below may delay this
         self.hub.estop = engaged
+        self._armed.set()
         self.bus.publish(topics.ESTOP, EStopState(engaged, who))
         self.hub.set("estop", {"type": "estop", "engaged": engaged})
         self.bus.publish(
@@ -187,11 +190,20 @@ class Teleop:
     def _publish(self, v: float, w: float) -> None:
         self.command = (v, w)
         self.bus.publish(topics.CMD_VEL, Twist(v, w))
+        if (v, w) != (0.0, 0.0):
+            self._armed.set()
 
     async def _deadman_loop(self) -> None:
-        """Runs until the node stops; every step is synchronous, so nothing can hold it up."""
+        """Runs until the node stops; every step is synchronous, so nothing can hold it up.
+        Every DEADMAN_CHECK_S while a command stands or the e-stop is engaged; at rest every
+        DEADMAN_IDLE_S, and a command or the e-stop wakes it at once."""
         while True:
-            await asyncio.sleep(DEADMAN_CHECK_S)
+            if self.estop or self.command != (0.0, 0.0):
+                await asyncio.sleep(DEADMAN_CHECK_S)
+            else:
+                self._armed.clear()
+                with contextlib.suppress(asyncio.TimeoutError):
+                    await asyncio.wait_for(self._armed.wait(), DEADMAN_IDLE_S)
             if self.estop:
                 self._hold_estop()
             silent = time.monotonic() - self.last_control
