@@ -50,22 +50,38 @@ SOCKET_PROBE = """
   };
 })();
 """
+# Records the events that end a drive on the page (drive.js lets go on each), so a timeout can say
+# whether the page let go and why.
+RELEASE_PROBE = """
+(() => {
+  window.sageReleases = [];
+  const note = (e) => window.sageReleases.push(
+    `${e.type}@${Math.round(performance.now())}ms on ${e.target && (e.target.id || e.target.nodeName)}`);
+  for (const type of ["blur", "pointerup", "pointercancel", "lostpointercapture", "visibilitychange"]) {
+    window.addEventListener(type, note, true);
+  }
+})();
+"""
 FIRST_ROUND = f"""window.sageSockets.every(
     (s) => s.open && (s.messages > 0 || {list(QUIET_SOCKETS)!r}.some((p) => s.url.endsWith(p))))"""
 
 
-def wait_until(cond: Any, what: str, timeout: float = WAIT_S, robot: Any = None) -> Any:
-    """A bounded wait; with ``robot``, a timeout also says what teleop and the robot were doing."""
-    detail = None if robot is None else (lambda: drive_state(robot))
+def wait_until(cond: Any, what: str, timeout: float = WAIT_S, robot: Any = None, page: Any = None) -> Any:
+    """A bounded wait; with ``robot``, a timeout also says what teleop and the robot were doing (and
+    with ``page``, which of the events that end a drive the page saw)."""
+    detail = None if robot is None else (lambda: drive_state(robot, page))
     return _wait_until(cond, what, timeout, poll=0.05, detail=detail)
 
 
-def drive_state(robot: Any) -> str:
+def drive_state(robot: Any, page: Any = None) -> str:
     teleop = robot.web_node().teleop
     odom = robot.odom
     moving = "no odometry" if odom is None else f"v={odom.twist.linear_x:.3f} w={odom.twist.angular_z:.3f}"
-    return (f"sim t={robot.ctx.clock.now():.2f}; teleop command={teleop.command} counts={teleop.counts}; "
-            f"{moving}")
+    state = (f"sim t={robot.ctx.clock.now():.2f}; teleop command={teleop.command} counts={teleop.counts}; "
+             f"{moving}")
+    if page is not None:
+        state += f"; the page's release events: {page.evaluate('window.sageReleases')}"
+    return state
 
 
 def sim_seconds(robot: Any, seconds: float) -> None:
@@ -115,6 +131,7 @@ def operator(browser: Any, robot: Any) -> Iterator[Any]:
 
 def open_teleop(operator: Any, robot: Any) -> tuple[Any, Console]:
     page = operator.new_page()
+    page.add_init_script(RELEASE_PROBE)
     console = Console(page)
     page.goto(f"{robot.url}/teleop")
     page.wait_for_selector("#link.up", timeout=WAIT_S * 1000)
@@ -172,6 +189,51 @@ def test_camera_is_subscribed_only_while_a_page_shows_it(operator: Any, robot: A
     assert console.errors == []
 
 
+# Holds /ws/camera's frames back until the test calls window.sageShowCamera().
+CAMERA_GATE = """
+(() => {
+  const Native = window.WebSocket;
+  let open = false;
+  const held = [];
+  window.sageShowCamera = () => { open = true; held.splice(0).forEach((f) => f()); };
+  window.WebSocket = class extends Native {
+    constructor(...args) {
+      super(...args);
+      if (!String(args[0]).endsWith("/ws/camera")) return;
+      const gate = (fn) => (e) => (open ? fn(e) : held.push(() => fn(e)));
+      const native = Object.getOwnPropertyDescriptor(Native.prototype, "onmessage");
+      Object.defineProperty(this, "onmessage", { set: (fn) => native.set.call(this, gate(fn)) });
+      const add = this.addEventListener.bind(this);
+      this.addEventListener = (type, fn, ...rest) => add(type, type === "message" ? gate(fn) : fn, ...rest);
+    }
+  };
+})();
+"""
+
+
+def test_the_drive_controls_stay_put_when_the_video_starts(operator: Any, robot: Any) -> None:
+    """An operator's finger or mouse is often already on the joystick when the first camera frame
+    arrives: nothing on the page may move under it then (it once jumped the height of the video,
+    and a pressed joystick became a drag of the video that let go of the robot)."""
+    page = operator.new_page()
+    page.add_init_script(CAMERA_GATE)
+    console = Console(page)
+    page.goto(f"{robot.url}/teleop")
+    page.wait_for_selector("#link.up", timeout=WAIT_S * 1000)
+    controls = ("#joystick", "#throttle", "#brake", "#wheel", "#estop")
+    before = {c: page.locator(c).bounding_box() for c in controls}
+    assert page.evaluate(CAMERA_SHOWN) is False, "the gate let a frame through"
+    page.evaluate("window.sageShowCamera()")
+    page.wait_for_function(CAMERA_SHOWN, timeout=WAIT_S * 1000)
+    page.wait_for_function("document.getElementById('camera-note').textContent === ''",
+                           timeout=WAIT_S * 1000)
+    after = {c: page.locator(c).bounding_box() for c in controls}
+    assert after == before, f"controls moved when the video started: {before} -> {after}"
+    assert page.get_attribute("#camera", "draggable") == "false"
+    page.close()
+    assert console.errors == []
+
+
 def test_holding_arrow_up_drives_and_releasing_stops(operator: Any, robot: Any) -> None:
     page, console = open_teleop(operator, robot)
     wait_until(lambda: robot.odom is not None and stopped(robot), what="a still robot", robot=robot)
@@ -204,7 +266,8 @@ def test_joystick_pedal_and_wheel_drive_and_stop(operator: Any, robot: Any) -> N
         page.mouse.down()
         if selector == "#joystick":
             page.mouse.move(cx, cy - box["height"] * 0.4, steps=4)  # push forward
-        wait_until(lambda s=start: moved_from(robot, s) > MOVED_M, what=f"{selector} to drive", robot=robot)
+        wait_until(lambda s=start: moved_from(robot, s) > MOVED_M, what=f"{selector} to drive", robot=robot,
+                   page=page)
         page.mouse.up()
         wait_until(lambda: stopped(robot), what=f"the robot to stop after releasing {selector}", robot=robot)
     # the steering wheel turned a quarter to the right turns the robot clockwise in place
@@ -237,9 +300,14 @@ def test_closing_the_page_while_driving_stops_the_robot(operator: Any, robot: An
     start = odom_xy(robot)
     page.keyboard.down("ArrowUp")
     wait_until(lambda: moved_from(robot, start) > MOVED_M, what="the robot to drive", robot=robot)
-    page.close()  # the key is still held: only the server can stop the robot now
-    wait_until(lambda: stopped(robot), what="the robot to stop after the page closed", robot=robot)
+    # The tab's renderer dies with the key held: no keyup, no blur, no goodbye on the socket (a
+    # plain close lets the page send its stop on `blur` first, and then the server has nothing to
+    # do). Only the server can stop the robot now.
+    with pytest.raises(Exception, match="crash"):
+        page.goto("chrome://crash")
+    wait_until(lambda: stopped(robot), what="the robot to stop after the page died", robot=robot)
     assert teleop.counts["close_stops"] + teleop.counts["deadman_stops"] > stops_before
+    page.close()
 
 
 def test_estop_blocks_driving_until_released_on_purpose(operator: Any, robot: Any) -> None:
