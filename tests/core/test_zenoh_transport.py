@@ -224,6 +224,14 @@ def test_a_zenoh_config_file_rules_where_the_profile_is_silent(tmp_path: Path) -
         session_config(ZenohSettings(config_file=str(tmp_path / "none.json5")), None, None)
 
 
+def test_zenohs_shared_memory_is_off_unless_the_profile_turns_it_on() -> None:
+    """SAGE's messages are plain bytes: the shared-memory transport only added its watchdog
+    thread to every process (docs/benchmarks.md, the robot at rest)."""
+    assert session_config(ZenohSettings(), None, None).get_json("transport/shared_memory/enabled") == "false"
+    on = session_config(ZenohSettings(shared_memory=True), None, None)
+    assert on.get_json("transport/shared_memory/enabled") == "true"
+
+
 async def test_a_service_of_another_process_is_called_through_the_bus(peer: tuple[str, int]) -> None:
     robot, port = peer
     transport = ZenohTransport(_settings(robot, [], [f"tcp/127.0.0.1:{port}"]))

@@ -10,8 +10,11 @@ Its bus is a Zenoh peer that finds the others at the supervisor's router (``--co
 then talks to each directly. ``--clock source`` (the
 simulator's group) steps a simulated clock and publishes ``/clock``; ``--clock follow`` takes
 time from ``/clock`` (:class:`~sage_robot.core.clock_follow.FollowerClock`); ``--clock wall``
-is the real robot's time. The group's launcher reports on ``/sage/group_health/<group>``;
-the supervisor merges the reports into ``/sage/health``.
+is the real robot's time. With ``--clock-board PATH`` (groups on one machine) the simulator
+also writes its time on a shared page at every physics step and the followers read it there
+instead of following ``/clock`` (:mod:`sage_robot.core.clock_board`). The group's launcher
+reports on ``/sage/group_health/<group>``; the supervisor merges the reports into
+``/sage/health``.
 
 In the simulator the MCU's pseudo-terminal lives in the simulator's process: that group keeps
 a link to it at ``--export-port`` (moved when the simulator restarts) and the motion group's
@@ -29,6 +32,7 @@ import contextlib
 import json
 import os
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +42,7 @@ from sage_robot.app.registry import node_class
 from sage_robot.app.runtime import make_transport, run_launcher
 from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.clock import Clock, SimClock, WallClock
+from sage_robot.core.clock_board import ClockBoard
 from sage_robot.core.clock_follow import FollowerClock, publish_clock
 from sage_robot.core.config import Settings, load_profile
 from sage_robot.core.errors import ConfigError, SageError
@@ -79,12 +84,22 @@ def group_specs(mode: str, nodes: list[str]) -> list[NodeSpec]:
     return [NodeSpec(n, node_class(n), critical.get(n, False)) for n in nodes]
 
 
-def make_clock(mode: str, start: float) -> Clock:
+def make_clock(mode: str, start: float, board: str = "") -> Clock:
     if mode == "source":
         return SimClock(start)
     if mode == "follow":
-        return FollowerClock(start)
+        return FollowerClock(start, ClockBoard(board) if board else None)
     return WallClock()
+
+
+def write_board(ctx: NodeContext, board: ClockBoard) -> None:
+    """The simulator's group: put the time on the shared page at every physics step."""
+    clock, speed = ctx.clock, float(ctx.settings.sim.speed or 0.0)
+
+    def on_step(_dt: float) -> None:
+        board.write(clock.now(), time.monotonic(), speed)
+
+    ctx.resources[SIM_STEP_HOOKS].append(on_step)
 
 
 async def keep_port_link(ctx: NodeContext, link: Path) -> None:
@@ -147,7 +162,7 @@ async def run_group(
 async def _run_following(
     ctx: NodeContext, specs: list[NodeSpec], clock: FollowerClock, parent_pipe: bool
 ) -> Launcher:
-    sub = clock.attach(ctx.bus)
+    sub = None if clock.reads_board else clock.attach(ctx.bus)
     launcher = Launcher(ctx, specs)
     launcher.install_signal_handlers()
     if parent_pipe:
@@ -157,7 +172,8 @@ async def _run_following(
         await launcher._stop_event.wait()
         await launcher.stop()
     finally:
-        sub.close()
+        if sub is not None:
+            sub.close()
         ctx.bus.transport.close()
     return launcher
 
@@ -166,9 +182,11 @@ def build_context(args: argparse.Namespace) -> tuple[NodeContext, list[NodeSpec]
     overrides = json.loads(args.overrides) if args.overrides else {}
     settings = group_settings(args.profile, overrides, args.connect)
     specs = group_specs(args.mode, [n for n in args.nodes.split(",") if n])
-    clock = make_clock(args.clock, args.start_time)
+    clock = make_clock(args.clock, args.start_time, args.clock_board)
     ctx = NodeContext(Bus(clock, make_transport(settings)), clock, settings)
     ctx.resources[SIM_STEP_HOOKS] = []
+    if args.clock == "source" and args.clock_board:
+        write_board(ctx, ClockBoard(args.clock_board))
     ctx.resources[HEALTH_TOPIC] = group_health_topic(args.group)
     if args.mcu_port:
         ctx.resources[PORT_RESOURCE] = args.mcu_port
@@ -188,6 +206,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--overrides", default="", help="settings overrides as a JSON object")
     p.add_argument("--clock", default="wall", choices=CLOCK_MODES)
     p.add_argument("--start-time", type=float, default=0.0, help="simulated start time (s)")
+    p.add_argument("--clock-board", default="",
+                   help="the shared page of the simulator's time (source: written; follow: read)")
     p.add_argument("--export-port", default="", help="keep a link to the simulated MCU's pty here")
     p.add_argument("--mcu-port", default="", help="the serial bridge opens this port")
     p.add_argument("--nice", type=int, default=0, help="lower this process's CPU priority by this much")

@@ -14,7 +14,9 @@ merges the reports into ``/sage/health`` (what the pages show) every
 (state, restarts, exit, pid). A group counts as running once its first report came in.
 
 The groups talk through the supervisor's Zenoh router (:mod:`.zenoh_hub`). In the simulator
-the ``sim`` group steps the clock and publishes ``/clock``; the others follow it.
+the ``sim`` group steps the clock; it writes the time on a shared page in the run folder
+(:mod:`sage_robot.core.clock_board`) that the other groups and the supervisor read, and
+publishes ``/clock`` for tools and for processes on other machines.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from typing import Any, Protocol
 
 from sage_robot.app.group_main import group_health_topic
 from sage_robot.core import topics
+from sage_robot.core.clock_board import ClockBoard
 from sage_robot.core.config import Settings
 from sage_robot.core.config.processes import CLOCK_GROUP, group_of
 from sage_robot.core.errors import ConfigError
@@ -47,6 +50,7 @@ HEALTH_PERIOD_S = 1.0  # the merged /sage/health goes out at least this often (s
 STOP_GRACE_S = 5.0  # SIGTERM, then this long before SIGKILL (s)
 PROCESS_PREFIX = "process:"  # health entries of the groups themselves
 MCU_LINK = "mcu_port"  # in the run folder: the link to the simulated MCU's pty
+CLOCK_BOARD = "clock.board"  # in the run folder: the simulator's time (group_main --clock-board)
 BRIDGE_NODE = "serial_bridge"
 
 
@@ -69,6 +73,7 @@ class GroupPlan:
     critical: bool
     argv: list[str]
     clock: str = "wall"  # source | follow | wall (group_main --clock)
+    board: str = ""  # the shared page of the simulator's time (group_main --clock-board)
 
 
 @dataclass
@@ -108,6 +113,7 @@ def plan_groups(
         )
     order = sorted(groups, key=lambda g: g != CLOCK_GROUP)
     link = os.path.join(run_dir, MCU_LINK)
+    board = os.path.join(run_dir, CLOCK_BOARD)
     plans = []
     for name in order:
         members = groups[name]
@@ -126,8 +132,10 @@ def plan_groups(
                 argv += ["--export-port", link]
             if BRIDGE_NODE in members:
                 argv += ["--mcu-port", link]
+            argv += ["--clock-board", board]
         argv += ["--clock", clock]
-        plans.append(GroupPlan(name, members, any(n in critical for n in members), argv, clock))
+        plans.append(GroupPlan(name, members, any(n in critical for n in members), argv, clock,
+                               board if simulated else ""))
     return plans
 
 
@@ -141,8 +149,13 @@ class GroupSupervisor:
     def __init__(self, plans: list[GroupPlan], hub: Hub) -> None:
         self.groups = {p.name: GroupProcess(p) for p in plans}
         self.hub = hub
+        boards = {p.board for p in plans if p.board}
+        if len(boards) > 1:
+            raise ConfigError(f"process groups: one simulator's time, not {len(boards)} ({sorted(boards)})")
+        # the simulator's time: a new page, before any group starts (they open it)
+        self.board = ClockBoard.create(boards.pop()) if boards else None
         self.log = get_logger("process_groups")
-        self.sim_time: float | None = None  # the last /clock seen
+        self._clock_seen: float | None = None  # the last /clock (without a board)
         self._stopping = False
         self._stop_event = asyncio.Event()
         self._tasks: list[asyncio.Task[None]] = []
@@ -161,7 +174,8 @@ class GroupSupervisor:
         for sig in (signal.SIGINT, signal.SIGTERM):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.add_signal_handler(sig, self.request_stop)
-        self.hub.subscribe(topics.CLOCK, self._on_clock)
+        if self.board is None:
+            self.hub.subscribe(topics.CLOCK, self._on_clock)
         for name in self.groups:
             self.hub.subscribe(group_health_topic(name), lambda msg, g=name: self._on_report(g, msg))
         for g in self.groups.values():
@@ -180,13 +194,22 @@ class GroupSupervisor:
             await self._end(g)
         self._publish_health()
 
+    @property
+    def sim_time(self) -> float | None:
+        """The simulator's time as last written or published (None: none yet)."""
+        if self.board is not None:
+            reading = self.board.read()
+            return None if reading is None else reading.t
+        return self._clock_seen
+
     def health_msg(self) -> HealthReport:
         """Every node of every group (a down group's nodes in its state) and the groups."""
         nodes: list[NodeHealth] = []
         for g in self.groups.values():
             nodes += self._node_entries(g)
         nodes += [self._process_entry(g) for g in self.groups.values()]
-        stamp = self.sim_time if self.sim_time is not None else time.time()
+        sim_time = self.sim_time
+        stamp = sim_time if sim_time is not None else time.time()
         return HealthReport(stamp, tuple(nodes))
 
     # ---------------------------------------------------------------- supervision
@@ -211,8 +234,9 @@ class GroupSupervisor:
 
     async def _run_once(self, g: GroupProcess) -> int:
         argv = list(g.plan.argv)
-        if g.plan.clock == "source" and self.sim_time is not None:
-            argv += ["--start-time", repr(self.sim_time)]  # a restarted simulator goes on from there
+        sim_time = self.sim_time
+        if g.plan.clock == "source" and sim_time is not None:
+            argv += ["--start-time", repr(sim_time)]  # a restarted simulator goes on from there
         g.state, g.report = NodeState.STARTING, None
         beat = heartbeat_fd() if BRIDGE_NODE in g.plan.nodes else None  # `sage up`'s last word
         # Its stdin is a pipe nobody writes to: it reads end-of-file once this process is gone.
@@ -242,7 +266,8 @@ class GroupSupervisor:
         if not g.plan.critical:
             return
         self.log.error("critical process group down: stopping the robot", group=g.plan.name)
-        stamp = self.sim_time if self.sim_time is not None else time.time()
+        sim_time = self.sim_time
+        stamp = sim_time if sim_time is not None else time.time()
         try:
             self.hub.publish(topics.CMD_VEL, Twist())
             self.hub.publish(topics.EVENTS, Event(stamp, "supervisor", "safety_stop",
@@ -252,7 +277,8 @@ class GroupSupervisor:
 
     # ---------------------------------------------------------------- health
     def _on_clock(self, msg: SimTime) -> None:
-        self.sim_time = msg.clock if self.sim_time is None else max(self.sim_time, msg.clock)
+        seen = self._clock_seen
+        self._clock_seen = msg.clock if seen is None else max(seen, msg.clock)
 
     def _on_report(self, group: str, msg: HealthReport) -> None:
         g = self.groups[group]

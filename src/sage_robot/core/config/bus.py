@@ -45,6 +45,12 @@ class ZenohSettings(Section):
     multicast_scouting: bool = Field(
         False, description="Find peers by UDP multicast (off: endpoints are explicit)."
     )
+    shared_memory: bool = Field(
+        False,
+        description="Zenoh's shared-memory transport. SAGE's messages are plain bytes, which never "
+        "use it; on, every process runs its 20 Hz watchdog thread (at rest the robot's processes "
+        "took ~13 % more CPU: docs/benchmarks.md, the robot at rest).",
+    )
     config_file: str = Field(
         "",
         description="A Zenoh JSON5 configuration file applied first (router, TLS, user/password "

@@ -80,6 +80,8 @@ def session_config(z: ZenohSettings, listen: list[str] | None, connect: list[str
         keys["mode"] = z.mode
     if "multicast_scouting" in explicit:
         keys["scouting/multicast/enabled"] = z.multicast_scouting
+    if "shared_memory" in explicit:
+        keys["transport/shared_memory/enabled"] = z.shared_memory
     if listen is not None or "listen" in explicit:
         keys["listen/endpoints"] = list(z.listen) if listen is None else listen
     if connect is not None or "connect" in explicit:
