@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from sage_robot.bench.bus_rest import _end_session, session_ticks
+from sage_robot.bench.bus_rest import _end_session, session_ticks, session_usage
 from tests.support.waits import wait_until
 
 BUSY_S = 0.5  # CPU each process burns before it sleeps (s)
@@ -36,6 +36,12 @@ def test_a_sessions_cpu_counts_its_children_and_its_end_takes_them_all() -> None
     try:
         wait_until(lambda: session_ticks(leader.pid)[0] >= burned, "both processes' CPU counted", 30.0)
         assert session_ticks(leader.pid)[1] == 2, "the leader and its child"
+        # per process name: both are `python -c CODE`, so one entry with both's CPU; once both
+        # sleep, each has been woken at least once
+        wait_until(lambda: sum(w for _, w in session_usage(leader.pid).values()) >= 2, "both asleep", 30.0)
+        usage = session_usage(leader.pid)
+        assert list(usage) == [Path(sys.executable).name]
+        assert usage[Path(sys.executable).name][0] >= burned
     finally:
         _end_session(leader)
     wait_until(lambda: session_ticks(leader.pid)[1] == 0, "nothing of the session left", 10.0)

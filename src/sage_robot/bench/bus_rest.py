@@ -19,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,9 +30,41 @@ STOP_GRACE_S = 10.0  # SIGINT, then this long before SIGKILL (s)
 LOG_TAIL_CHARS = 400  # of a robot that ended early, quoted in the error
 
 
-def session_ticks(sid: int) -> tuple[int, int]:
-    """(utime + stime in clock ticks, process count) of the living processes in session ``sid``."""
-    total = count = 0
+def _wakes(pid: str) -> int:
+    """Voluntary context switches of every thread of ``pid`` (how often its threads slept and
+    were woken), 0 when it ended meanwhile."""
+    total = 0
+    try:
+        tids = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return 0
+    for tid in tids:
+        try:
+            status = Path(f"/proc/{pid}/task/{tid}/status").read_text()
+        except OSError:
+            continue
+        for line in status.splitlines():
+            if line.startswith("voluntary_ctxt_switches:"):
+                total += int(line.split()[1])
+    return total
+
+
+def _process_name(pid: str) -> str:
+    """A process group's name (``--group NAME``), else the module it runs (``-m``: the last
+    part of its name, ``main`` for the supervisor), else its program's name."""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return "?"
+    for flag in (b"--group", b"-m"):
+        if flag in argv[:-1]:
+            return argv[argv.index(flag) + 1].decode(errors="replace").rsplit(".", 1)[-1]
+    return Path(argv[0].decode(errors="replace")).name or "?"
+
+
+def _session_processes(sid: int) -> Iterator[tuple[str, list[str]]]:
+    """(pid, /proc/<pid>/stat fields after the name) of the living processes in session ``sid``;
+    ``fields[0]`` is field 3 of proc(5), the state."""
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
@@ -39,12 +72,30 @@ def session_ticks(sid: int) -> tuple[int, int]:
             stat = Path(f"/proc/{entry}/stat").read_text()
         except OSError:  # ended meanwhile
             continue
-        fields = stat[stat.rfind(")") + 2 :].split()  # fields[0] is the state, field 3 of proc(5)
-        if int(fields[6 - 3]) != sid:
-            continue
-        total += int(fields[14 - 3]) + int(fields[15 - 3])
-        count += 1
-    return total, count
+        fields = stat[stat.rfind(")") + 2 :].split()
+        if int(fields[6 - 3]) == sid:
+            yield entry, fields
+
+
+def _cpu_ticks(fields: list[str]) -> int:
+    return int(fields[14 - 3]) + int(fields[15 - 3])  # utime + stime
+
+
+def session_usage(sid: int) -> dict[str, tuple[int, int]]:
+    """Process name -> (utime + stime in clock ticks, voluntary wake-ups) of the living
+    processes in session ``sid`` (processes of the same name summed)."""
+    usage: dict[str, tuple[int, int]] = {}
+    for pid, fields in _session_processes(sid):
+        name = _process_name(pid)
+        ticks, wakes = usage.get(name, (0, 0))
+        usage[name] = (ticks + _cpu_ticks(fields), wakes + _wakes(pid))
+    return usage
+
+
+def session_ticks(sid: int) -> tuple[int, int]:
+    """(utime + stime in clock ticks, process count) of the living processes in session ``sid``."""
+    procs = list(_session_processes(sid))
+    return sum(_cpu_ticks(fields) for _, fields in procs), len(procs)
 
 
 # The one-process robot's ports, so that it runs beside the groups (which keep the defaults).
@@ -84,12 +135,25 @@ def measure(warm_s: float, window_s: float) -> list[dict[str, Any]]:
             if proc.poll() is not None:
                 tail = log_path.read_text(errors="replace")[-LOG_TAIL_CHARS:]
                 raise SageError(f"sage sim {mode} ended during the warm-up (exit {proc.returncode}): {tail}")
-        before = [session_ticks(proc.pid) for _, proc, _ in procs]
+        before = [(session_ticks(proc.pid), session_usage(proc.pid)) for _, proc, _ in procs]
         time.sleep(window_s)
-        after = [session_ticks(proc.pid) for _, proc, _ in procs]
+        after = [(session_ticks(proc.pid), session_usage(proc.pid)) for _, proc, _ in procs]
+    runs = zip(procs, before, after, strict=True)
+    return [_run_summary(mode, b, a, window_s) for (mode, _, _), b, a in runs]
+
+
+def _run_summary(mode: str, before: Any, after: Any, window_s: float) -> dict[str, Any]:
+    """One mode's CPU over the window, in all and per process (with its wake-ups per second)."""
     hz = os.sysconf("SC_CLK_TCK")
-    return [{"mode": mode.lstrip("-"), "processes": b[1], "cpu_s": round((a[0] - b[0]) / hz, 2),
-             "window_s": window_s} for (mode, _, _), b, a in zip(procs, before, after, strict=True)]
+    (t0, count), usage0 = before
+    (t1, _), usage1 = after
+    per = {}
+    for name, (ticks, wakes) in sorted(usage1.items()):
+        ticks0, wakes0 = usage0.get(name, (ticks, wakes))  # started during the window: not counted
+        per[name] = {"cpu_s": round((ticks - ticks0) / hz, 2),
+                     "wakes_per_s": round((wakes - wakes0) / window_s)}
+    return {"mode": mode.lstrip("-"), "processes": count, "cpu_s": round((t1 - t0) / hz, 2),
+            "window_s": window_s, "by_process": per}  # fmt: skip
 
 
 def _end_session(proc: subprocess.Popen[bytes]) -> None:
