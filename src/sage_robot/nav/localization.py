@@ -36,6 +36,8 @@ Pose = tuple[float, float, float]
 Fix = tuple[Pose, Pose]  # a refined map pose and the odometry pose it was taken at
 
 HEALTH_WINDOW = 5  # scans averaged into the health score
+HEALTH_SCORE_DECIMALS = 2  # the published score's resolution (0.01): at rest it then repeats
+#   itself, and other processes get it when it changes or every 0.5 s (bus.zenoh.repeat_every_s)
 FORCED_UPDATES_AFTER_RESET = 8  # filter updates without motion after a global relocalization
 FORCED_UPDATE_PERIOD_S = 0.3  # how often those forced updates may run (s)
 MIN_INITIAL_SIGMA_XY_M = 0.05
@@ -211,7 +213,8 @@ class LocalizationNode(Node):
         score = float(np.mean(self._scores)) if self._scores else 0.0
         lost = len(self._scores) > 0 and score < nav.lost_below
         spread, hypotheses = self._cloud
-        self.health = LocalizationHealth(scan.stamp, score, lost, self.pf.count, round(spread, 3), hypotheses)
+        self.health = LocalizationHealth(scan.stamp, round(score, HEALTH_SCORE_DECIMALS), lost, self.pf.count,
+                                         round(spread, 3), hypotheses)
         self.bus.publish(topics.LOC_HEALTH, self.health)
 
     async def teardown(self) -> None:
