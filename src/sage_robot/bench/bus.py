@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import os
 import time
 from typing import Any
 
@@ -88,6 +89,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {"bench": "bus", "cases": cases}
     if not args.no_zenoh:
         out["zenoh_cases"] = _zenoh_cases(args.zenoh_scale)
+        # latency between processes is the machine's scheduling as much as the bus's: say how busy
+        out["load_avg_1m"] = round(os.getloadavg()[0], 2)
     if args.at_rest:
         from sage_robot.bench.bus_rest import run_at_rest
 
