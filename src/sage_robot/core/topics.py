@@ -61,7 +61,8 @@ NAV_STATE = Topic("/nav/state", NavigateFeedback, latched=True)  # the navigator
 # the local costmap (1 Hz), the teleop map's layer
 COSTMAP = Topic("/nav/costmap", OccupancyGrid, latched=True)
 LOC_HEALTH = Topic("/localization/health", LocalizationHealth)
-MAP_ODOM = Topic("/localization/map_odom", PoseStamped)  # pose of the odom frame in the map (map->odom)
+# pose of the odom frame in the map (map->odom); latched: a page that opens places the robot at once
+MAP_ODOM = Topic("/localization/map_odom", PoseStamped, latched=True)
 TOUR_STATE = Topic("/sage/tour", TourState, latched=True)  # the visitor's tour (brain's tour node)
 
 # Simulator-only truth (tests and benchmarks read these; nodes above sim never do)

@@ -146,11 +146,9 @@ class Hub:
         sub(topics.BATTERY, BatteryState, self._on_battery)
         sub(topics.UI_STATE, UiState, self._on_ui_state, maxsize=50)
         sub(topics.AMCL_POSE, PoseWithCovariance, self._on_amcl)
-        sub(topics.MAP_ODOM, PoseStamped, self._on_map_odom)
         sub(topics.PLAN, Path, self._on_plan)
         sub(topics.GOAL_POSE, PoseStamped, self._on_goal)
         sub(topics.MAP, OccupancyGrid, self._on_map, maxsize=2)
-        sub(topics.COSTMAP, OccupancyGrid, lambda m: self.set("costmap", costmap_json(m)), maxsize=1)
         self.nav.start()
         sub(topics.EVENTS, Event, self._on_event, maxsize=50)
         sub(topics.AUDIO_OUT, AudioChunk, self._on_audio, maxsize=50)
@@ -168,15 +166,18 @@ class Hub:
         self._live_views()
 
     def _live_views(self) -> None:
-        """The fast streams only pages show (odometry at 50 Hz, localization's score, the
-        lidar's points, the simulated people, the speaker's direction) are subscribed while
-        some page is open. At rest nobody converts them, and when the pages run in a process
-        of their own nothing is even sent to it. The map->odom correction stays subscribed,
-        so the first odometry a new page brings is placed on the map at once; without a page
-        the pose follows ``/amcl_pose``, and :meth:`current_pose` fetches a fresh one."""
+        """The streams only pages show (odometry at 50 Hz, the map->odom correction, the
+        navigator's costmap, localization's score, the lidar's points, the simulated people,
+        the speaker's direction) are subscribed while some page is open. At rest nobody
+        converts them, and when the pages run in a process of their own nothing is even sent
+        to it. The correction and the costmap are latched: a page that opens gets their last
+        values at once, so its first odometry is placed on the map. Without a page the pose
+        follows ``/amcl_pose``, and :meth:`current_pose` fetches a fresh one."""
         if self.listeners and not self._live and self._started:
             sub = self.bus.subscribe
             self._live = [
+                sub(topics.MAP_ODOM, PoseStamped, self._on_map_odom),  # first: latched, before odometry
+                sub(topics.COSTMAP, OccupancyGrid, lambda m: self.set("costmap", costmap_json(m)), maxsize=1),
                 sub(topics.ODOM, Odometry, self._on_odom),
                 sub(topics.LOC_HEALTH, LocalizationHealth, self._on_loc),
                 sub(topics.SCAN, LaserScan, self._on_scan, maxsize=2),
@@ -189,7 +190,7 @@ class Hub:
             self._live = []
             for channel in PAGE_ONLY_CHANNELS:  # stale by the next page
                 self.latest.pop(channel, None)
-            self._odom = None
+            self._odom = None  # the correction is kept: the next page's latched one replaces it
             self.robot_pose, self.robot_frame = None, ""  # /amcl_pose sets it again
 
     async def current_pose(self, timeout_s: float) -> tuple[tuple[float, float, float] | None, str]:
@@ -204,16 +205,22 @@ class Hub:
             if not fresh.done():
                 fresh.set_result(msg)
 
-        sub = self.bus.subscribe(topics.ODOM, Odometry, take)
+        correction: list[tuple[float, float, float]] = []  # the latched map->odom, when there is one
+        def on_correction(msg: PoseStamped) -> None:
+            correction.append(msg.pose.as_tuple())
+
+        subs: list[Subscription[Any]] = [self.bus.subscribe(topics.MAP_ODOM, PoseStamped, on_correction),
+                                         self.bus.subscribe(topics.ODOM, Odometry, take)]
         try:
             msg = await asyncio.wait_for(fresh, timeout_s)
         except asyncio.TimeoutError:  # no odometry: what localization said last (or nothing)
             return self.robot_pose, self.robot_frame
         finally:
-            sub.close()
-        if self._map_odom is None:
+            for sub in subs:
+                sub.close()
+        if not correction:
             return msg.pose.as_tuple(), msg.frame_id
-        return compose(self._map_odom, msg.pose.as_tuple()), "map"
+        return compose(correction[-1], msg.pose.as_tuple()), "map"
 
     # ------------------------------------------------------------ fan-out
     def set(self, channel: str, message: dict[str, Any]) -> None:
