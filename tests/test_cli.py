@@ -48,3 +48,16 @@ def test_sim_runs_headless_on_simulated_time():
     )
     assert out.returncode == 0, out.stderr
     assert "simulated 5.0 s" in out.stdout
+
+
+def test_the_service_unit_lets_the_motion_process_take_its_real_time_priority(tmp_path, capsys):
+    profile = tmp_path / "p.yaml"
+    profile.write_text("processes:\n  realtime:\n    motion: 30\n")
+    assert main(["install-service", "--out", str(tmp_path / "a.service")]) == 0
+    assert main(["--profile", str(profile), "install-service", "--processes",
+                 "--out", str(tmp_path / "b.service")]) == 0
+    default, custom = (tmp_path / "a.service").read_text(), (tmp_path / "b.service").read_text()
+    assert "\nLimitRTPRIO=40\n" in default
+    assert "\nLimitRTPRIO=30\n" in custom
+    assert "up --mode tour\n" in default
+    assert f"--profile {profile.resolve()} up --mode tour --processes\n" in custom

@@ -21,12 +21,13 @@ import pytest
 
 from sage_robot.app.process_groups import PROCESS_PREFIX, GroupSupervisor, plan_groups
 from sage_robot.app.profiles import PROFILES
-from sage_robot.core import topics
+from sage_robot.core import realtime, topics
 from sage_robot.core.config import load_profile, parse_profile
 from sage_robot.core.config.processes import DEFAULT_GROUPS, ProcessSettings, group_of
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.msgs import Event, Odometry
 from sage_robot.core.node import NodeState
+from tests.support.sched import fifo_permitted
 from tests.support.waits import until
 
 CLOCK_SLACK_S = 1.0  # simulated s: /clock messages in flight to the supervisor
@@ -73,6 +74,16 @@ def test_speech_and_the_brain_run_at_a_lower_cpu_priority_by_default() -> None:
     assert "--nice" not in plans["motion"]
     with pytest.raises(ValueError, match="nice of group 'voice'"):
         ProcessSettings(nice={"voice": 40})
+
+
+def test_the_motion_process_runs_at_a_real_time_priority_by_default() -> None:
+    settings = load_profile(None, {})
+    nodes = [(n, False) for n in ("sim_world", "mcu_sim", "serial_bridge", "navigator", "voice")]
+    plans = {p.name: p.argv for p in plan_groups(settings, "sim", nodes, "tcp/127.0.0.1:7447", "/tmp")}
+    assert plans["motion"][plans["motion"].index("--realtime") + 1] == "40"
+    assert [g for g, argv in plans.items() if "--realtime" in argv] == ["motion"]
+    with pytest.raises(ValueError, match=r"realtime priority of group .nav.: 0 is not in 1\.\.99"):
+        ProcessSettings(realtime={"nav": 0})
 
 
 def test_the_motion_process_imports_no_ml_package() -> None:
@@ -159,6 +170,9 @@ async def _crash_and_recover(sup: GroupSupervisor, odom: list[Odometry], events:
     # processes.nice: aux yields the cores to the others (every thread it starts inherits it)
     assert os.getpriority(os.PRIO_PROCESS, pids["aux"]) == 3
     assert os.getpriority(os.PRIO_PROCESS, pids["motion"]) == 0
+    # processes.realtime: motion at SCHED_FIFO 40 where the machine allows it (else it says why)
+    assert realtime.describe(pids["motion"]) == ("SCHED_FIFO 40" if fifo_permitted() else "normal")
+    assert realtime.describe(pids["aux"]) == "normal"
     os.kill(pids["aux"], signal.SIGKILL)
     t0 = time.monotonic()
     await until(lambda: g["aux"].state is NodeState.RUNNING and g["aux"].pid != pids["aux"], "aux back",

@@ -48,6 +48,7 @@ from sage_robot.core.config import Settings, load_profile
 from sage_robot.core.errors import ConfigError, SageError
 from sage_robot.core.msgs import HealthReport
 from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
+from sage_robot.core.realtime import set_fifo
 from sage_robot.hardware.mcu.bridge import PORT_READ_ELSEWHERE, PORT_RESOURCE
 
 GROUP_HEALTH_PREFIX = "/sage/group_health/"  # + group name: a group's launcher reports here
@@ -211,6 +212,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument("--export-port", default="", help="keep a link to the simulated MCU's pty here")
     p.add_argument("--mcu-port", default="", help="the serial bridge opens this port")
     p.add_argument("--nice", type=int, default=0, help="lower this process's CPU priority by this much")
+    p.add_argument("--realtime", type=int, default=0,
+                   help="run this process at this real-time priority (SCHED_FIFO 1-99; 0: normal)")
     p.add_argument("--parent-pipe", action="store_true",
                    help="stop when stdin reaches its end (the supervisor is gone)")
     return p.parse_args(argv)
@@ -220,6 +223,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.nice:  # first, so every thread the process starts has it
         os.nice(args.nice)
+    if args.realtime:
+        refused = set_fifo(args.realtime)
+        if refused:  # the robot runs on; the operator learns why its motion path is not real-time
+            print(f"sage group {args.group}: {refused}; running at the normal priority", file=sys.stderr)
     try:
         ctx, specs = build_context(args)
         asyncio.run(run_group(ctx, specs, args.export_port, args.parent_pipe))

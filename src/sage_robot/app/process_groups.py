@@ -123,6 +123,9 @@ def plan_groups(
         nice = settings.processes.nice.get(name, 0)
         if nice:
             argv += ["--nice", str(nice)]
+        realtime = settings.processes.realtime.get(name, 0)
+        if realtime:
+            argv += ["--realtime", str(realtime)]
         if profile:
             argv += ["--profile", profile]
         clock = "wall"

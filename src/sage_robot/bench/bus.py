@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--zenoh-scale", type=float, default=1.0, help="scale the Zenoh cases' message counts (e.g. 0.2)"
     )
+    p.add_argument("--receiver-fifo", type=int, default=None, metavar="PRIORITY",
+                   help="SCHED_FIFO priority of the paced /cmd_vel case's receiver, 0: normal "
+                        "(default: the motion group's processes.realtime)")
     p.add_argument("--at-rest", action="store_true",
                    help="also the CPU of `sage sim` at rest, one process vs process groups (minutes)")
     p.add_argument("--rest-warm", type=float, default=50.0, help="--at-rest: warm-up per mode (s)")
@@ -88,7 +91,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             cases.append({"message": label, **result})
     out: dict[str, Any] = {"bench": "bus", "cases": cases}
     if not args.no_zenoh:
-        out["zenoh_cases"] = _zenoh_cases(args.zenoh_scale)
+        out["zenoh_cases"] = _zenoh_cases(args.zenoh_scale, _motion_fifo(args.receiver_fifo))
         # latency between processes is the machine's scheduling as much as the bus's: say how busy
         out["load_avg_1m"] = round(os.getloadavg()[0], 2)
     if args.at_rest:
@@ -98,7 +101,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def _zenoh_cases(scale: float) -> list[dict[str, Any]] | str:
+def _motion_fifo(asked: int | None) -> int:
+    """The paced /cmd_vel receiver's real-time priority: as asked, or the motion group's."""
+    if asked is not None:
+        return asked
+    from sage_robot.core.config.processes import ProcessSettings
+
+    return ProcessSettings().realtime.get("motion", 0)
+
+
+def _zenoh_cases(scale: float, motion_fifo: int = 0) -> list[dict[str, Any]] | str:
     if scale <= 0:
         from sage_robot.core.errors import SageError
 
@@ -119,7 +131,7 @@ def _zenoh_cases(scale: float) -> list[dict[str, Any]] | str:
     finally:
         transport.close()
     in_process = {"message": "small", "transport": "zenoh attached, in-process subscriber", **local}
-    return [in_process, *run_cases(default_cases(scale))]
+    return [in_process, *run_cases(default_cases(scale, motion_fifo))]
 
 
 class _Stamped:

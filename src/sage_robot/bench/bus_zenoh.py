@@ -10,6 +10,12 @@ stamp (``Twist`` carries it in ``angular_z``, a float64 with µs resolution).
 
 Each case is either *paced* (a fixed rate, the latency a node sees) or *flood* (as fast as
 the publisher can, the throughput; its latency includes the queue that builds up).
+
+The paced ``/cmd_vel`` case receives as the robot's motion process does: at the real-time priority
+the profile gives it (``processes.realtime``, :mod:`sage_robot.core.realtime`) where this
+process may take it, and say so (``receiver``); the publisher runs at the normal priority, as
+the navigator and the web server do. The other cases' receivers (navigation, the pages; a
+flood, which would hold a real-time receiver's core) run at the normal priority.
 """
 
 from __future__ import annotations
@@ -42,14 +48,18 @@ class Case:
     kind: str  # cmd_vel, scan or camera
     messages: int
     rate_hz: float | None  # None: flood
+    receiver_fifo: int = 0  # the receiving process's SCHED_FIFO priority (0: normal)
 
 
-def default_cases(scale: float) -> list[Case]:
+def default_cases(scale: float, motion_fifo: int = 0) -> list[Case]:
+    """The cases; paced ``/cmd_vel`` received at ``motion_fifo`` (the motion group's
+    ``processes.realtime``)."""
+
     def n(count: int) -> int:
         return max(10, int(count * scale))
 
     return [
-        Case("/cmd_vel Twist", "cmd_vel", n(3000), 1000.0),
+        Case("/cmd_vel Twist", "cmd_vel", n(3000), 1000.0, motion_fifo),
         Case("/cmd_vel Twist", "cmd_vel", n(20000), None),
         Case(f"/scan LaserScan {SCAN_BEAMS} beams", "scan", n(500), 50.0),
         Case(f"/scan LaserScan {SCAN_BEAMS} beams", "scan", n(5000), None),
@@ -112,9 +122,14 @@ def _stamp(msg: Any) -> float:
 async def _receive(case: Case, robot: str) -> dict[str, Any]:
     from sage_robot.core.bus import Bus
     from sage_robot.core.clock import WallClock
+    from sage_robot.core.realtime import describe, set_fifo, set_normal
     from sage_robot.core.transport.zenoh_bus import ZenohTransport
 
     port = _free_port()
+    refused = set_fifo(case.receiver_fifo) if case.receiver_fifo else None
+    receiver = describe()
+    if refused:
+        receiver += f" ({refused})"
     transport = ZenohTransport(settings_for(robot, [f"tcp/127.0.0.1:{port}"], []))
     bus = Bus(WallClock(), transport)
     latencies: list[float] = []
@@ -146,7 +161,8 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
             child.kill()
             await child.wait()
         transport.close()
-    return _summary(case, latencies, times)
+        set_normal()
+    return {**_summary(case, latencies, times), "receiver": receiver, "publisher": "normal"}
 
 
 async def _until_received_or_exited(done: asyncio.Event, child: Any) -> None:
@@ -230,6 +246,9 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--child", nargs=5, metavar=("ROBOT", "PORT", "KIND", "N", "RATE"), required=True)
     robot, port, kind, n, rate = p.parse_args(argv).child
+    from sage_robot.core.realtime import set_normal
+
+    set_normal()  # not the receiver's real-time priority, which a child inherits
     asyncio.run(_publish(robot, int(port), kind, int(n), float(rate)))
 
 

@@ -27,7 +27,9 @@ Type=simple
 User={user}
 WorkingDirectory={workdir}
 Environment=PYTHONUNBUFFERED=1
-ExecStart={sage} {profile_arg}up --mode {mode}
+# the motion process may take its real-time priority (processes.realtime, --processes)
+LimitRTPRIO={rtprio}
+ExecStart={sage} {profile_arg}up --mode {mode}{processes}
 Restart=on-failure
 RestartSec=5
 KillSignal=SIGINT
@@ -77,6 +79,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
     p = sub.add_parser("install-service", help="write a systemd unit so the robot starts at boot")
     p.add_argument("--mode", default="tour", choices=["tour", "slam"])
+    p.add_argument("--processes", action="store_true",
+                   help="run the process groups (crash isolation; motion at its real-time priority)")
     p.add_argument("--out", default="/etc/systemd/system/sage.service", help="where to write the unit")
     p.add_argument("--user", default=os.environ.get("SUDO_USER") or os.environ.get("USER") or "root")
     p.set_defaults(func=run_install_service)
@@ -224,8 +228,12 @@ def _health_over_web(settings: Any, url_arg: str | None) -> Any:
 def run_install_service(args: argparse.Namespace) -> int:
     sage = shutil.which("sage") or str(Path(sys.executable).with_name("sage"))
     profile_arg = f"--profile {Path(args.profile).resolve()} " if args.profile else ""
+    from sage_robot.core.config import load_profile
+
+    rtprio = max(load_profile(args.profile, {}).processes.realtime.values(), default=0)
     unit = SERVICE_TEMPLATE.format(
-        mode=args.mode, user=args.user, workdir=Path.cwd(), sage=sage, profile_arg=profile_arg
+        mode=args.mode, user=args.user, workdir=Path.cwd(), sage=sage, profile_arg=profile_arg, rtprio=rtprio,
+        processes=" --processes" if args.processes else "",
     )
     out = Path(args.out)
     try:

@@ -40,6 +40,14 @@ DEFAULT_GROUPS: dict[str, tuple[str, ...]] = {
 DEFAULT_NICE: dict[str, int] = {"voice": 5, "brain": 5}
 MAX_NICE = 19
 
+# Real-time priority by group (Linux SCHED_FIFO, 1..99): the motion process (serial bridge,
+# dead-man) is small and mostly asleep, and a /cmd_vel or a stop must reach it within a couple
+# of milliseconds whatever the rest of the robot is doing (sage_robot.core.realtime). 40 stays
+# below the kernel's threaded interrupt handlers (50 on PREEMPT_RT kernels, as the Jetson's
+# can be), so the serial port's interrupts still come first.
+DEFAULT_REALTIME: dict[str, int] = {"motion": 40}
+MAX_REALTIME = 99
+
 
 class ProcessSettings(Section):
     groups: dict[str, tuple[str, ...]] = Field(
@@ -52,6 +60,12 @@ class ProcessSettings(Section):
         description="Group name -> how much lower its CPU priority is (Linux nice, 0-19; "
         "groups not named run at 0). Under load the cores go to the other groups first.",
     )
+    realtime: dict[str, int] = Field(
+        default_factory=lambda: dict(DEFAULT_REALTIME),
+        description="Group name -> its real-time priority (Linux SCHED_FIFO, 1-99): it preempts "
+        "every normal process when it wakes. Only for small groups that are mostly asleep. Needs "
+        "CAP_SYS_NICE or LimitRTPRIO; without it the group runs at the normal priority and says so.",
+    )
 
     @field_validator("nice")
     @classmethod
@@ -60,6 +74,14 @@ class ProcessSettings(Section):
             if not 0 <= value <= MAX_NICE:
                 raise ValueError(f"nice of group {group!r}: {value} is not in 0..{MAX_NICE}")
         return nice
+
+    @field_validator("realtime")
+    @classmethod
+    def _realtime_range(cls, realtime: dict[str, int]) -> dict[str, int]:
+        for group, value in realtime.items():
+            if not 1 <= value <= MAX_REALTIME:
+                raise ValueError(f"realtime priority of group {group!r}: {value} is not in 1..{MAX_REALTIME}")
+        return realtime
 
     @field_validator("groups")
     @classmethod
