@@ -118,6 +118,7 @@ class SerialBridgeNode(Node):
         self.port_path = ""
         self.tx_count = self.ctx.resources.setdefault(TX_COUNT_RESOURCE, TxCount())
         self._rx_thread: threading.Thread | None = None
+        self._reader_fd: int | None = None  # followed simulated time: the loop reads the port
         self._rx_stop = threading.Event()
         self._lost = threading.Event()
         self._lost_reason = ""
@@ -310,16 +311,14 @@ class SerialBridgeNode(Node):
             self.align.reset()
         self._lost.clear()
         self._rx_stop = threading.Event()
-        if not self.clock.is_lockstep:  # a real port, or time that follows another process
-            deliver = self._on_bytes
-            if self.clock.is_simulated:  # followed time is the loop's: bytes are decoded (stamped) there
-                loop = asyncio.get_running_loop()
-
-                def deliver(data: bytes) -> None:
-                    with contextlib.suppress(RuntimeError):  # the loop closed: shutting down
-                        loop.call_soon_threadsafe(self._on_bytes, data)
-
-            args = (port, self._rx_stop, deliver)
+        if self.clock.is_simulated and not self.clock.is_lockstep:
+            # Time that follows another process is the loop's: bytes are decoded (stamped)
+            # there, so the loop waits on the port itself (a thread would only hand them over,
+            # two wake-ups per read instead of one).
+            self._reader_fd = port.fileno()
+            asyncio.get_running_loop().add_reader(self._reader_fd, self._on_readable, port)
+        elif not self.clock.is_lockstep:  # a real port: read whatever the loop is doing
+            args = (port, self._rx_stop, self._on_bytes)
             self._rx_thread = threading.Thread(
                 target=self._rx_loop, args=args, name="serial_bridge.rx", daemon=True
             )
@@ -356,6 +355,7 @@ class SerialBridgeNode(Node):
         self.bus.publish(topics.EVENTS, Event(self.clock.now(), self.name, kind, message))
 
     def _close_port(self) -> None:
+        self._stop_reader()
         self._rx_stop.set()
         if self._rx_thread is not None:
             self._rx_thread.join(RX_JOIN_TIMEOUT_S)
@@ -378,6 +378,23 @@ class SerialBridgeNode(Node):
         except Exception as exc:  # SerialException/OSError on unplug; anything else too
             if not stop.is_set():
                 self._mark_lost(f"{type(exc).__name__}: {exc}")
+
+    def _on_readable(self, port: Any) -> None:
+        """Followed simulated time: the port is readable (or hung up), read on the loop."""
+        try:
+            data = port.read(port.in_waiting or 1)
+        except Exception as exc:  # SerialException/OSError: the simulator's pty went away
+            self._stop_reader()
+            self._mark_lost(f"{type(exc).__name__}: {exc}")
+            return
+        if data:
+            self._on_bytes(data)
+
+    def _stop_reader(self) -> None:
+        if self._reader_fd is not None:
+            with contextlib.suppress(RuntimeError, ValueError, OSError):  # the loop or fd closed first
+                asyncio.get_running_loop().remove_reader(self._reader_fd)
+            self._reader_fd = None
 
     def _poll_rx(self) -> None:
         """Lockstep simulated clock: read what the port holds, in the loop (the simulator's pty makes
