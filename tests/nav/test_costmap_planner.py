@@ -237,3 +237,18 @@ def test_a_plan_keeps_out_of_what_the_controllers_window_finds_impassable() -> N
     assert (in_window(straight.points) >= INSCRIBED).any()
     with cm.impassable_as(None):
         assert plan(cm, (2.0, 3.0), (8.0, 3.0)).length_m == pytest.approx(straight.length_m)
+
+
+def test_a_narrow_cell_weighs_more_the_nearer_it_is_to_the_walls() -> None:
+    # Across a narrow gap the costs differ by a few units only (240 in its middle, 248 at its
+    # sides in the TurtleBot sandbox): each unit must weigh enough that the path keeps to the
+    # middle instead of hugging the inside of a bend (issue #20).
+    from sage_robot.nav.planner import NARROW_WEIGHT, weights_from_cost
+
+    narrow = 186
+    w = weights_from_cost(np.array([100, 186, 187, 240, 248, 252, 253, 254, 255], dtype=np.uint8), narrow)
+    assert w[0] < w[1] < w[2]  # the ordinary cost slope, then the narrow step
+    assert w[2] - w[1] >= NARROW_WEIGHT
+    assert w[4] - w[3] >= 6.0  # eight units nearer the wall: worth more than a cell of detour each side
+    assert w[3] < w[4] < w[5]
+    assert np.isinf(w[6:]).all()  # inscribed, lethal, unknown
