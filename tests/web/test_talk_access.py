@@ -67,8 +67,11 @@ def on_loop(server: WebServer, fn: Callable[[], Any]) -> Any:
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[WebServer]:
-    """The web server on loopback over plain http (a secure context: the microphone works)."""
-    with web_server(tmp_path_factory.mktemp("talk-access"), {"tls": "off"}) as s:
+    """The web server on loopback over plain http (a secure context: the microphone works).
+    The tests share it and its per-address question limit, which is not what they test
+    (``test_phone_e2e.py`` does): a generous one, or on a fast machine the module's requests
+    spend the burst and the last test's typed question is answered 429."""
+    with web_server(tmp_path_factory.mktemp("talk-access"), {"tls": "off", "talk_per_min": 600.0}) as s:
         yield s
 
 
