@@ -22,9 +22,9 @@
   :data:`BATTERY_PUBLISH_PERIOD_S`, however often the firmware reports it) and
   (``mcu.imu_enabled``) IMU -> ``/imu/data`` after the start-up bias calibration,
   publishing through ``bus.publish_threadsafe``. On a simulated clock that follows another
-  process's ``/clock`` the thread only reads: the bytes are decoded and stamped on the loop,
-  whose clock that is. On a lockstep simulated clock there is no thread: the loop reads the
-  port every :data:`SIM_RX_POLL_S`.
+  process's (process groups) there is no thread: the loop waits on the port (``add_reader``)
+  and decodes and stamps the bytes itself, on the clock it follows. On a lockstep simulated
+  clock there is no thread either: the loop reads the port every :data:`SIM_RX_POLL_S`.
 - Run by the supervisor (:mod:`sage_robot.app.supervisor`, ``sage up``'s default), it
   writes a heartbeat byte every ``HEARTBEAT_PERIOD_S`` to the pipe the supervisor gave it;
   when the heartbeat stops (frozen process, stalled loop) the supervisor stops the motors.
