@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from sage_robot.nav.collision_guard import MARGIN_M, guarded, scan_points
+from sage_robot.nav.collision_guard import MARGIN_M, guarded, leg_like, scan_points
 
 RADIUS_M = 0.25
 
@@ -45,3 +45,46 @@ def test_scan_points_in_the_robot_frame() -> None:
     pts = scan_points(angles, ranges, 12.0, (0.1, 0.0, math.pi))  # mounted backwards, 0.1 m ahead
     assert pts.shape == (1, 2)
     assert np.allclose(pts[0], [-0.9, 0.0])
+
+
+def _arc(cx: float, cy: float, r: float, n: int) -> np.ndarray:
+    """Returns on the half of a circle that faces the lidar at the origin, in beam order."""
+    face = math.atan2(-cy, -cx)
+    a = np.linspace(face - math.pi / 2 + 0.2, face + math.pi / 2 - 0.2, n)
+    pts = np.column_stack([cx + r * np.cos(a), cy + r * np.sin(a)])
+    return pts[np.argsort(np.arctan2(pts[:, 1], pts[:, 0]))]
+
+
+def _wall(x: float, y0: float, y1: float, n: int) -> np.ndarray:
+    return np.column_stack([np.full(n, x), np.linspace(y0, y1, n)])
+
+
+def test_a_persons_legs_keep_the_body_clear_of_the_body_around_them() -> None:
+    # A person 0.515 m ahead (the bodies touch at 0.5), legs 0.11 m either side of the body's
+    # centre, a wall 3 m behind.
+    # Head-on, the body's front (0.25 m) lies 0.23 m beyond the legs' returns: 2 cm from the
+    # legs the robot already touched the body (the TurtleBot sandbox: a stander, pressed on).
+    legs = np.vstack([_arc(0.515, -0.11, 0.035, 6), _arc(0.515, 0.11, 0.035, 6)])
+    scene = np.vstack([_wall(3.6, -1.5, -0.3, 30), legs, _wall(3.6, 0.3, 1.5, 30)])
+    scene = scene[np.argsort(np.arctan2(scene[:, 1], scene[:, 0]))]
+    marks = leg_like(scene)
+    assert marks[np.isin(scene, legs).all(axis=1)].all()  # both legs
+    assert not marks[scene[:, 0] > 3.0].any()  # not the wall
+    # 1.5 cm on, the bodies would touch: with the legs' margin it stops, while 2 cm from the
+    # legs alone would let it on
+    assert guarded(0.15, 0.0, scene, RADIUS_M) == 0.15
+    assert guarded(0.15, 0.0, scene, RADIUS_M, legs=marks) == 0.0
+    assert guarded(0.0, 0.8, scene, RADIUS_M, legs=marks) == 0.0  # it may still turn away
+    assert guarded(-0.1, 0.0, scene, RADIUS_M, legs=marks) == -0.1
+
+
+def test_a_door_frame_or_a_pillar_is_not_a_leg() -> None:
+    # A doorway's frame: its returns run on into the wall beside it (no gap behind them).
+    frame = np.vstack([_wall(0.6, -1.0, -0.45, 12), _wall(1.5, -0.4, 0.4, 16), _wall(0.6, 0.45, 1.0, 12)])
+    frame = frame[np.argsort(np.arctan2(frame[:, 1], frame[:, 0]))]
+    assert not leg_like(frame[frame[:, 0] < 1.0]).any()  # the frame's two sides alone
+    pillar = _arc(0.8, 0.0, 0.2, 20)  # 0.4 m across, standing clear: too wide for a leg
+    assert not leg_like(np.vstack([_wall(3.0, -1.5, -0.6, 10), pillar, _wall(3.0, 0.6, 1.5, 10)])).any()
+    # a pillar's face 5 mm beyond the ordinary margin still stops it, legs or no legs
+    pts = _pillar(0.25 + MARGIN_M + 0.1 + 0.005, 0.0)
+    assert guarded(0.15, 0.0, pts, RADIUS_M, legs=leg_like(pts)) == 0.0

@@ -142,3 +142,34 @@ async def test_the_sandboxs_bending_gaps_are_driven_through_their_middle(tmp_pat
     assert not result.value.reason, result.value.reason
     assert math.hypot(sim.pose[0] - goal[0], sim.pose[1] - goal[1]) <= GOAL_TOLERANCE_TRUTH_M
     assert sim.collisions == 0
+
+
+async def test_a_mapped_table_leg_is_not_a_persons_leg(tmp_path) -> None:
+    # The collision guard keeps the body 0.24 m from returns that look like a person's legs
+    # (the body around them is not seen). A table's legs look the same to the lidar: those on
+    # the map (willow-full's furniture), or beside its unknown cells, keep the ordinary 2 cm,
+    # or the robot would be held in every office (five timeouts in nine legs there).
+    from sage_robot.core.msgs import LaserScan
+
+    mapped = room(5.0, 2.5, RES)
+    fill(mapped, 2.0, 1.5, 2.1, 1.6, WALL)  # a table leg on the map
+    world = _world_copy(mapped)
+    fill(world, 2.0, 0.8, 2.1, 0.9, WALL)  # one that is not: to the guard, someone's leg
+    start = (1.0, 1.25, 0.0)
+    path = write_building(tmp_path, mapped, {"START": start, "GOAL": (4.5, 1.25, 0.0)})
+    async with running(settings_for(path, "START"), world, start) as (bus, clock, sim):
+        scans: list[LaserScan] = []
+        bus.subscribe(topics.SCAN, LaserScan, scans.append)
+        nav = sim.nodes[2]
+        await clock.sleep(1.0)
+        assert scans
+        base, legs = nav._scan_base, nav._scan_legs
+        assert legs is not None
+        assert len(legs) == len(base)
+        x, y = base[:, 0] + start[0], base[:, 1] + start[1]  # the robot faces +x at its start
+        at_table = np.hypot(x - 2.05, y - 1.55) < 0.1
+        at_unmapped = np.hypot(x - 2.05, y - 0.85) < 0.1
+        assert at_table.any()
+        assert at_unmapped.any()
+        assert not legs[at_table].any()
+        assert legs[at_unmapped].all()

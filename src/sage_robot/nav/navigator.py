@@ -15,6 +15,7 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 from sage_robot.core import topics
 from sage_robot.core.actions import ActionAborted, GoalContext, GoalTimeout
@@ -33,7 +34,7 @@ from sage_robot.core.msgs.nav import (
 )
 from sage_robot.core.node import Node
 from sage_robot.core.places import Place
-from sage_robot.nav.collision_guard import guarded, scan_points
+from sage_robot.nav.collision_guard import guarded, leg_like, scan_points
 from sage_robot.nav.costmap import Costmap
 from sage_robot.nav.costmap_msg import costmap_grid
 from sage_robot.nav.drive import GoalRun, Target
@@ -44,6 +45,7 @@ Pose = tuple[float, float, float]
 GLOBAL_OBSTACLE_MEMORY_M = 12.0  # scan obstacles further than this from the robot are forgotten
 STATE_PERIOD_S = 1.0  # NAV_STATE is repeated this often while a goal or tour runs (s)
 COSTMAP_PERIOD_S = 1.0  # the local costmap is published this often for the operator's map (s)
+UNKNOWN_HELD_CELLS = 2  # a leg-like return this close (cells) to the map's unknown is the map's
 IDLE = NavigateFeedback(NavState.IDLE)
 
 
@@ -60,6 +62,8 @@ class NavigatorNode(Node):
         self._correction: Pose | None = None
         self.scan: LaserScan | None = None
         self._scan_base: np.ndarray | None = None  # the latest scan's returns in the robot's frame
+        self._scan_legs: np.ndarray | None = None  # ... which of them look like a person's legs
+        self._held_cache: tuple[Costmap, np.ndarray] | None = None  # (costmap, what its map holds)
         self.guard_stops = 0  # commands the collision guard stopped (nav/collision_guard.py)
         self.health: LocalizationHealth | None = None
         self.commands = 0
@@ -107,11 +111,44 @@ class NavigatorNode(Node):
         mount = (lidar.x_m, lidar.y_m, lidar.yaw_rad)
         self._scan_base = scan_points(msg.angles, msg.ranges, msg.range_max, mount)
         pose = self.pose()
+        self._scan_legs = self._legs(self._scan_base, pose)
         if pose is None:
             return
         local = self.global_cm.window(pose[0], pose[1], self.settings.nav.local_costmap_m)
         local.update_scan(self.sensor_pose(pose), msg.angles, msg.ranges, msg.range_max)
         self.local_cm = local
+
+    def _legs(self, base: np.ndarray, pose: Pose | None) -> np.ndarray | None:
+        """Which returns look like a person's legs (the guard keeps the body off the body
+        around them): leg-shaped, and not on the map's walls (a table's or a chair's legs,
+        willow-full's furniture, are mapped; a person is not). Unlocalized: none."""
+        if pose is None:
+            return None
+        legs = leg_like(base)
+        if legs.any():
+            c, s = math.cos(pose[2]), math.sin(pose[2])
+            xs = pose[0] + c * base[legs, 0] - s * base[legs, 1]
+            ys = pose[1] + s * base[legs, 0] + c * base[legs, 1]
+            r, col = self.global_cm.geom.to_cell(xs, ys)
+            ok = self.global_cm.geom.inside(r, col)
+            mapped = np.ones(len(xs), dtype=bool)
+            mapped[ok] = self._held()[r[ok], col[ok]]
+            legs[np.flatnonzero(legs)[mapped]] = False
+        return legs
+
+    def _held(self) -> np.ndarray:
+        """Cells on or beside anything the map holds: its walls (the costmap's wall zone) and
+        its unknown cells, specks included (noise to the planner, but solid in a simulated
+        world built from the map, and often furniture in a real one)."""
+        if self._held_cache is not None and self._held_cache[0] is self.global_cm:
+            return self._held_cache[1]
+        g = self.data.grid
+        raw = np.asarray(g.data).reshape(g.height, g.width)
+        held: np.ndarray = self.global_cm.wall_zone.copy()
+        if raw.shape == held.shape:
+            held |= ndimage.binary_dilation(raw < 0, iterations=UNKNOWN_HELD_CELLS)
+        self._held_cache = (self.global_cm, held)
+        return held
 
     # ------------------------------------------------------------ helpers for GoalRun
     def pose(self) -> Pose | None:
@@ -133,7 +170,7 @@ class NavigatorNode(Node):
             raise AssertionError("the navigator never reverses here")  # broken code, not bad input
         self.commands += 1
         if self._scan_base is not None:  # the live scan's last word: never onto something seen
-            safe = guarded(v, w, self._scan_base, self.settings.robot.radius_m)
+            safe = guarded(v, w, self._scan_base, self.settings.robot.radius_m, legs=self._scan_legs)
             if safe != v:
                 self.guard_stops += 1
                 v = safe
