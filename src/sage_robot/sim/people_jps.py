@@ -233,7 +233,9 @@ class JpsCrowd(Crowd):
                 way = [(float(w[0]), float(w[1])) for w in self._routing.compute_waypoints((p.x, p.y), goal)]
             except RuntimeError:
                 way = [goal]
-            cached = (goal, way[1:] or [goal])
+            # a corner of the way can lie on the floor's edge, where JuPedSim refuses it as a
+            # target (its step failed on willow-2010): such corners are skipped
+            cached = (goal, [w for w in way[1:] if self._routing.is_routable(w)] or [goal])
             self._routes[p.id] = cached
         way = cached[1]
         while len(way) > 1 and math.hypot(way[0][0] - p.x, way[0][1] - p.y) < CORNER_M:
