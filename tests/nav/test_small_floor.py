@@ -121,27 +121,6 @@ def test_goal_taken_counts_what_stands_on_the_goal_not_the_walls() -> None:
     assert goal_taken(cm, (2.0, 1.25)) is None  # nothing on a goal elsewhere
 
 
-def test_the_spot_near_a_taken_goal_is_the_nearest_the_robot_fits_on_and_reaches() -> None:
-    from sage_robot.nav.blockers import spot_near
-    from sage_robot.nav.costmap import INSCRIBED, Costmap
-
-    cm = Costmap.from_grid(room(6.0, 2.5, RES), 0.25, 0.55, 3.0)
-    goal, start = (4.5, 1.25), (1.0, 1.25)
-    legs = np.array([-0.01, 0.01])  # someone stands on the goal
-    cm.update_scan((start[0], start[1], 0.0), legs, np.full(2, goal[0] - start[0]), 12.0)
-    spot = spot_near(cm, goal, start, 1.0)
-    assert spot is not None
-    r, c = cm.geom.to_cell(*spot)
-    assert cm.cost[int(r), int(c)] < INSCRIBED  # the robot fits there...
-    short = math.hypot(spot[0] - goal[0], spot[1] - goal[1])
-    assert 0.4 < short < 0.9, spot  # ...beside the person, not on them, and no further off
-    assert spot_near(cm, goal, start, 0.3) is None  # nowhere that near fits
-    # a wall across the room: the floor beyond it is near the goal but out of reach
-    walled = room(6.0, 2.5, RES)
-    fill(walled, 3.0, 0.0, 3.2, 2.5)
-    assert spot_near(Costmap.from_grid(walled, 0.25, 0.55, 3.0), goal, start, 1.0) is None
-
-
 
 @pytest.mark.parametrize(("start", "goal"), [
     ((-1.925, 0.675, 0.0), (-0.525, 1.575, 0.0)),  # between a pillar and the hexagon's wall

@@ -15,12 +15,11 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from sage_robot.nav.costmap import INSCRIBED, NO_INFORMATION, Costmap
+from sage_robot.nav.costmap import Costmap
 
 GOAL_TAKEN_M = 0.5  # scan marks this near the goal stand on it: the robot does not fit there (m)
 BLOB_SPAN_M = 1.5  # a blob on the goal is measured within this of it (m)
 _JOIN = 2  # marks this many cells apart are one blob
-START_SLACK_M = 0.1  # spot_near: the robot's own cell may lie in a pad; floor this near it counts (m)
 
 
 def goal_taken(cm: Costmap, goal: tuple[float, float], within_m: float = GOAL_TAKEN_M) -> float | None:
@@ -42,28 +41,3 @@ def goal_taken(cm: Costmap, goal: tuple[float, float], within_m: float = GOAL_TA
     spans = [max(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) - 2 * _JOIN
              for i, sl in enumerate(ndimage.find_objects(labels), start=1) if sl is not None and i in taken]
     return float(max(spans) * res)
-
-
-def spot_near(cm: Costmap, goal: tuple[float, float], start: tuple[float, float],
-              within_m: float) -> tuple[float, float] | None:
-    """The free cell nearest ``goal`` (within ``within_m`` of it) that the robot fits on and
-    reaches from ``start`` through cells it fits on, as the costmap shows them now; None when
-    there is none. Where the robot comes as close as it can to a goal someone stands on."""
-    fits = (cm.cost < INSCRIBED) & (cm.cost != NO_INFORMATION)
-    labels, _n = ndimage.label(fits)  # 4-connected: no squeezing between diagonal cells
-    j = math.ceil(START_SLACK_M / cm.geom.resolution)  # a robot stopped in a pad starts beside it
-    r0, c0 = (int(v) for v in cm.geom.to_cell(start[0], start[1]))
-    near = labels[max(r0 - j, 0):max(r0 + j + 1, 0), max(c0 - j, 0):max(c0 + j + 1, 0)]
-    mine = np.unique(near[near > 0])
-    if not len(mine):
-        return None
-    k = math.ceil(within_m / cm.geom.resolution)
-    gr, gc = (int(v) for v in cm.geom.to_cell(goal[0], goal[1]))
-    rs, cs = slice(max(gr - k, 0), max(gr + k + 1, 0)), slice(max(gc - k, 0), max(gc + k + 1, 0))
-    rows, cols = np.nonzero(np.isin(labels[rs, cs], mine))
-    if not len(rows):
-        return None
-    x, y = cm.geom.to_world(rows + rs.start, cols + cs.start)
-    d = np.hypot(x - goal[0], y - goal[1])
-    i = int(np.argmin(d))
-    return (float(x[i]), float(y[i])) if d[i] <= within_m else None

@@ -26,10 +26,8 @@ forward check stops every arc that gets closer, and it never reverses) first tur
 open floor and creeps clear (at most ``STEP_AWAY_M``).
 
 From step 3 on (waiting for people has failed), a robot within ``SETTLE_NEAR_GOAL_M`` of
-a goal that the latest scan shows something standing on settles near it instead (succeeded,
-with a note that says what stands at the spot and how far short it stopped): first it drives
-to the free spot nearest the goal it fits on, within ``GOAL_TAKEN_CLEAR_M``, facing the goal;
-with nothing there it climbs on.
+a goal that the latest scan shows something standing on settles there instead (succeeded,
+with a note that says what stands at the spot); with nothing there it climbs on.
 
 When localization is lost: stop, Event ``lost``, global relocalization while spinning
 slowly; if health does not come back within ``nav.relocalize_timeout_s``, Event
@@ -43,7 +41,7 @@ import asyncio
 import contextlib
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -55,7 +53,7 @@ from sage_robot.core.errors import ServiceError
 from sage_robot.core.geometry import wrap_angle
 from sage_robot.core.msgs import Text
 from sage_robot.core.msgs.nav import NavigateFeedback, NavigateResult, NavState
-from sage_robot.nav.blockers import goal_taken, spot_near
+from sage_robot.nav.blockers import goal_taken
 from sage_robot.nav.controller import ControllerParams, PurePursuit, escape_heading
 from sage_robot.nav.planner import PATH_SPACING_M, NoPath, Plan, path_blocked, plan
 from sage_robot.nav.social_drive import GROUP_EVENT_WITHIN_M, Social, group_ahead, keep_right_plan
@@ -84,9 +82,7 @@ RELOCALIZED_SPREAD_M = 0.5  # and the particle cloud must have shrunk to this (m
 ETA_MIN_SPEED_MPS = 0.3
 SETTLE_NEAR_GOAL_M = 3.5  # with the goal itself taken by people, this close counts as arrived (m);
 #   a standing person stops the robot 2.4-3.1 m away (legs padding, inscribed radius, forward check)
-GOAL_TAKEN_CLEAR_M = 1.0  # people on the goal: plan as if this much around it were free (m);
-#   and before settling short of it, the robot drives to the free spot nearest it within this
-APPROACH_GAIN_M = 0.3  # ... when that spot is at least this much nearer the goal than the robot (m)
+GOAL_TAKEN_CLEAR_M = 1.0  # people on the goal: plan as if this much around it were free (m)
 KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
 STEP_AWAY_M = 0.5  # longest step away from an obstacle the robot stands too close to (m)
 STEP_AWAY_CLEAR_M = 0.05  # step away until this much beyond the inscribed radius (m)
@@ -131,7 +127,6 @@ class GoalRun:
         self.travelled = 0.0
         self._last_xy: tuple[float, float] | None = None
         self._level = 0
-        self._approached = False  # the goal was taken and the robot drove as near it as it fits
         self._level_xy: tuple[float, float] | None = None
         self._waited_s = 0.0  # waited for people since the ladder last reset (s)
         self._asked_at = -math.inf  # when "excuse me" was last said on this goal (clock s)
@@ -249,8 +244,7 @@ class GoalRun:
                 cmd = ctl.step(pose, self.node.local_cm)
                 if cmd.arrived:
                     self.node.stop()
-                    if not self._approached:  # (near a taken goal the settling says it)
-                        self.node.event("arrived", f"arrived at {self.target.spoken}", place=self.target.name)
+                    self.node.event("arrived", f"arrived at {self.target.spoken}", place=self.target.name)
                     return
                 if cmd.blocked:
                     raise Blocked("an obstacle is in the way")
@@ -380,44 +374,11 @@ class GoalRun:
         size = await self.clock.offload(self._goal_taken, pose, self.node.scan)
         if size is None:
             return ""
-        if not self._approached:
-            self._approached = True
-            short = await self._approach(pose)
         self.node.event("arrived", f"arrived near {self.target.spoken}", place=self.target.name)
         if size <= PERSON_SIZED_M:
             return f"stopped {short:.1f} m short: someone is standing at the spot"
         return (f"stopped {short:.1f} m short: something not on the map, about {size:.1f} m across, "
                 "stands at the spot")
-
-    async def _approach(self, pose: tuple[float, float, float]) -> float:
-        """The goal is taken: drive to the free spot nearest it that the robot fits on and can
-        reach (within GOAL_TAKEN_CLEAR_M), facing the goal, when that is APPROACH_GAIN_M nearer
-        than where it stands; a way blocked meanwhile leaves it where it got. Its distance to
-        the goal then (m). (The wait stopped it where the people's pads stopped the forward
-        check: 2.3-2.6 m short in the TurtleBot sandbox, with free floor within 1 m of the goal.)"""
-        gx, gy, _ = goal = self.target.pose
-        short = math.hypot(pose[0] - gx, pose[1] - gy)
-        spot = await self.clock.offload(self._spot_near, pose, self.node.scan)
-        if spot is None or math.hypot(spot[0] - gx, spot[1] - gy) > short - APPROACH_GAIN_M:
-            return short
-        facing = math.atan2(gy - spot[1], gx - spot[0])
-        self.target = replace(self.target, pose=(spot[0], spot[1], facing))
-        try:
-            await self._drive()
-        except Blocked:
-            self.node.stop()
-        finally:
-            self.target = replace(self.target, pose=goal)
-        now = self.pose()
-        return math.hypot(now[0] - gx, now[1] - gy)
-
-    def _spot_near(self, pose: tuple[float, float, float], scan: Any) -> tuple[float, float] | None:
-        """:func:`blockers.spot_near` on the global costmap as the latest scan shows it. Runs
-        in a worker thread, its inputs taken on the event loop."""
-        cm = self.node.global_cm
-        cm.clear_obstacles()
-        self.node.refresh_global(pose, scan)
-        return spot_near(cm, self.target.pose[:2], pose[:2], GOAL_TAKEN_CLEAR_M)
 
     def _goal_taken(self, pose: tuple[float, float, float], scan: Any) -> float | None:
         """What the latest scan shows on the goal (:func:`blockers.goal_taken`). Runs in a
