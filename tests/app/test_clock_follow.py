@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from collections.abc import Callable
 
 import pytest
 
@@ -98,5 +99,31 @@ def test_a_clock_that_is_not_paced_moves_only_with_its_messages() -> None:
         clock.follow(5.0)  # speed 0: a simulator running as fast as it can
         await asyncio.sleep(0.05)
         assert clock.now() == 5.0
+
+    asyncio.run(body())
+
+
+def test_a_followers_timers_of_one_period_tick_together_whenever_they_started() -> None:
+    """The microphone's frames and the DOA broadcast (80 ms each) wake a follower once, not
+    twice: a follower's periodic jobs tick on whole multiples of their period."""
+
+    async def body() -> None:
+        clock = FollowerClock()
+        clock.follow(3.013)
+        first: list[float] = []
+        clock.every(0.08, lambda: first.append(clock.now()), "first")
+        await asyncio.sleep(0)
+        clock.follow(3.031)  # 18 ms later, in the same period
+        second: list[float] = []
+        clock.every(0.08, lambda: second.append(clock.now()), "second")
+        assert clock.phase(0.08) == pytest.approx(2.96)
+        def ticked(k: int) -> Callable[[], bool]:
+            return lambda: len(first) == len(second) == k
+
+        for k, t in enumerate((3.04, 3.12, 3.2), start=1):
+            clock.follow(t)
+            await until(ticked(k), "both ticked")
+        assert first == second == pytest.approx([3.04, 3.12, 3.2])
+        assert SimClock(3.013).phase(0.08) == 3.013  # a lockstep clock keeps its phase (determinism)
 
     asyncio.run(body())

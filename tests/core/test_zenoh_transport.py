@@ -288,7 +288,7 @@ def test_a_message_repeats_another_only_when_all_but_its_stamp_is_equal_and_it_i
 def test_repeat_periods_are_checked() -> None:
     with pytest.raises(ConfigError, match="repeat_every_s"):
         parse_profile("bus:\n  zenoh:\n    repeat_every_s: {/odom: 0}\n")
-    assert parse_profile("").bus.zenoh.repeat_every_s["/odom"] == 0.1
+    assert parse_profile("").bus.zenoh.repeat_every_s["/odom"] == 0.25
 
 
 async def test_an_unchanged_stream_reaches_other_processes_only_every_repeat_period() -> None:

@@ -18,6 +18,7 @@ from sage_robot.app.recording.nodes import FoxgloveNode
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import SimClock
 from sage_robot.core.config import load_profile
+from sage_robot.core.errors import ConfigError
 from sage_robot.core.msgs import Odometry, Pose2D, Twist
 from sage_robot.core.node import NodeContext
 
@@ -136,3 +137,14 @@ def test_token_is_stable_secret_dependent_and_stripped_before_the_sdk() -> None:
     assert forwarded.startswith("GET /live?a=1&b=2 HTTP/1.1\r\n")
     assert "Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n" in forwarded
     assert forwarded.endswith("\r\n\r\n")
+
+
+async def test_a_taken_port_is_a_clear_error_and_teardown_after_it_is_clean(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Any, loopback_node: FoxgloveNode
+) -> None:
+    clock = SimClock()
+    settings = load_profile(None, {"ops": {"foxglove_host": "127.0.0.1", "foxglove_port": loopback_node.port}})
+    second = FoxgloveNode(NodeContext(Bus(clock), clock, settings))
+    with pytest.raises(ConfigError, match="cannot listen on 127.0.0.1.*ops.foxglove_port"):
+        await second.setup()
+    await second.teardown()  # the launcher tears a failed node down: nothing left, no error

@@ -91,6 +91,11 @@ class Clock(ABC):
         """Call ``callback`` (sync or async) every ``period`` seconds of this clock."""
         return Timer(self, period, callback, name)
 
+    def phase(self, period: float) -> float:
+        """Where a periodic job of ``period`` starting now counts its ticks from (its first tick
+        is one period later): now, on this clock."""
+        return self.now()
+
     async def offload(self, fn: Callable[..., T], *args: Any, latency_s: float = 0.0) -> T:
         """``fn(*args)`` in a worker thread (CPU work that releases the GIL: numpy, models),
         so the event loop goes on. Nodes use this, never ``asyncio.to_thread``.
@@ -362,7 +367,7 @@ class Timer:
             raise ValueError(f"timer {name!r}: period must be > 0, got {period}")
         self.clock, self.period, self.callback, self.name = clock, period, callback, name
         self.ticks = 0
-        self._start = clock.now()
+        self._start = clock.phase(period)
         self._task = asyncio.get_running_loop().create_task(self._loop(), name=f"timer:{name}")
 
     async def _loop(self) -> None:

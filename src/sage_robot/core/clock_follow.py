@@ -80,6 +80,12 @@ class FollowerClock(SimClock):
         self.advance_to(t)
         self._rearm()
 
+    def phase(self, period: float) -> float:
+        """Periodic jobs tick on whole multiples of their period: jobs of one period (the
+        microphone's frames and the DOA broadcast, 80 ms) fall due together and the process
+        wakes once for them, not once for each (each wake-up costs ~0.2 ms of CPU here)."""
+        return math.floor(self.now() / period) * period
+
     @property
     def reads_board(self) -> bool:
         """Whether the time comes from a shared page (then ``/clock`` is not needed)."""

@@ -121,7 +121,7 @@ class SimMicrophone:
     async def read(self) -> np.ndarray:
         """The next 80 ms frame, at its time on the clock."""
         if self._t0 is None:
-            self._t0 = self._echo_t = self.clock.now()
+            self._t0 = self._echo_t = self.clock.phase(FRAME_S)
         self._skip_silence_when_behind()
         self.frames += 1
         if self.paced:

@@ -173,6 +173,8 @@ class FoxgloveNode(Node):
                 self.log.error("cannot send to Foxglove", topic=topic, error=str(exc))
 
     async def teardown(self) -> None:
+        if getattr(self, "_remove_tap", None) is None:
+            return  # setup failed before the tap, and stopped what it had started
         self._remove_tap()
         self._on_viewers(0)
         await self.gate.stop()

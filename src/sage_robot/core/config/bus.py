@@ -19,7 +19,7 @@ ONE_POOL_RUNTIME = "(rx: (handover: app), acc: (handover: app), tx: (handover: a
 # Every change goes at once. Odometry keeps 10 Hz for ROS 2 tools' TF lookups.
 MAX_REPEAT_EVERY_S = 5.0  # a held-back stream still says it is alive this often (s)
 DEFAULT_REPEAT_EVERY_S: dict[str, float] = {
-    "/odom": 0.1,
+    "/odom": 0.25,
     "/localization/map_odom": 0.2,
     "/localization/health": 0.5,
     "/sim/speaker": 0.5,
