@@ -143,8 +143,9 @@ async def test_a_taken_port_is_a_clear_error_and_teardown_after_it_is_clean(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Any, loopback_node: FoxgloveNode
 ) -> None:
     clock = SimClock()
-    settings = load_profile(None, {"ops": {"foxglove_host": "127.0.0.1", "foxglove_port": loopback_node.port}})
+    ops = {"foxglove_host": "127.0.0.1", "foxglove_port": loopback_node.port}
+    settings = load_profile(None, {"ops": ops})
     second = FoxgloveNode(NodeContext(Bus(clock), clock, settings))
-    with pytest.raises(ConfigError, match="cannot listen on 127.0.0.1.*ops.foxglove_port"):
+    with pytest.raises(ConfigError, match=r"cannot listen on 127\.0\.0\.1.*ops\.foxglove_port"):
         await second.setup()
     await second.teardown()  # the launcher tears a failed node down: nothing left, no error

@@ -63,6 +63,9 @@ INJECT_RATIO = 0.5  # inject only once the short-term fit falls below this share
 CONFIDENT_SHARE = 0.9
 SWITCH_UPDATES = 8
 HOME_MIN_SHARE = 0.02
+MIN_JUDGED_RETURNS = 10  # the health score needs this many returns the map can judge (else NaN)
+UNMAPPED_FROM_WALL_M = 0.5  # a return ending this far from every mapped wall, on free floor, with no
+#   wall before it, hit something the map does not have and is not judged (nearer a wall it is)
 
 
 @dataclass(frozen=True)
@@ -364,9 +367,15 @@ def _weighted_pose(p: np.ndarray, w: np.ndarray) -> Estimate:
 
 def scan_fit(field: LikelihoodField, pose: tuple[float, float, float], sensor: tuple[float, float, float],
              angles: np.ndarray, ranges: np.ndarray, range_max: float, tolerance_m: float) -> float:
-    """Localization health: the fraction (0..1) of the scan's returns that land within
-    ``tolerance_m`` of a mapped obstacle when the scan is placed at ``pose``. People and
-    clutter lower it a little; a wrong pose lowers it a lot. NaN when there are no returns."""
+    """Localization health: of the scan's returns the map can judge, the fraction (0..1) that
+    land within ``tolerance_m`` of a mapped obstacle when the scan is placed at ``pose``.
+
+    A return that ends on known-free floor with no mapped wall before it along its beam hit
+    something the map does not have (a person, a box, a chair): it says nothing about the
+    pose and is not judged, so a crowd round the robot, or a hall whose few mapped walls are
+    far (most returns then come from people), leaves the score where the walls put it. A
+    return past a mapped wall, or in space the map does not know, counts against: a wrong
+    pose lowers the score a lot. NaN when fewer than :data:`MIN_JUDGED_RETURNS` can be judged."""
     ok = np.isfinite(ranges) & (ranges > 0) & (ranges < range_max)
     if not ok.any():
         return float("nan")
@@ -374,6 +383,14 @@ def scan_fit(field: LikelihoodField, pose: tuple[float, float, float], sensor: t
     x, y, t = pose
     c, s = math.cos(t), math.sin(t)
     ox, oy = x + c * sx - s * sy, y + s * sx + c * sy
-    a = t + st + angles[ok]
-    d = field.distances(ox + ranges[ok] * np.cos(a), oy + ranges[ok] * np.sin(a))
-    return float(np.mean(d <= tolerance_m))
+    a, r = t + st + angles[ok], ranges[ok]
+    ex, ey = ox + r * np.cos(a), oy + r * np.sin(a)
+    d = field.distances(ex, ey)
+    fits = d <= tolerance_m
+    rest = np.flatnonzero(d > UNMAPPED_FROM_WALL_M)
+    free = rest[field.on_free(ex[rest], ey[rest])]
+    unmapped = free[~field.crosses_wall(ox, oy, a[free], r[free] - tolerance_m)]
+    judged = len(r) - len(unmapped)
+    if judged < MIN_JUDGED_RETURNS:
+        return float("nan")
+    return float(np.count_nonzero(fits) / judged)

@@ -22,6 +22,7 @@ from sage_robot.nav.costmap import OCCUPIED_MIN, GridGeometry
 SIGMA_HIT_M = 0.2  # AMCL laser_sigma_hit
 Z_HIT, Z_RAND = 0.5, 0.5  # AMCL laser_z_hit / laser_z_rand
 LIKELIHOOD_MAX_DIST_M = 2.0  # AMCL laser_likelihood_max_dist
+MAX_TRACE_STEPS = 400  # a traced ray gives up after this many steps (12 m at half a 0.05 m cell: 480)
 BEAM_TEMPER = 0.2  # beams are not independent: log-likelihoods are scaled by this
 
 
@@ -33,7 +34,8 @@ class LikelihoodField:
         occupied = grid.data >= OCCUPIED_MIN
         dist = ndimage.distance_transform_edt(~occupied) * grid.resolution
         self.dist = np.minimum(dist, LIKELIHOOD_MAX_DIST_M).astype(np.float32)
-        self.free_cells = np.argwhere(grid.data == 0)
+        self.known_free = np.asarray(grid.data == 0)
+        self.free_cells = np.argwhere(self.known_free)
         if len(self.free_cells) == 0:
             raise ValueError("the map has no free cells to localize in")
         # Flat, padded copy: one border cell at the cap distance takes every point off the map.
@@ -66,6 +68,33 @@ class LikelihoodField:
         row = np.clip(((y - g.origin_y) / g.resolution).astype(np.int64) + 1, 0, self._rows - 1)
         flat: np.ndarray = row * self._width + col
         return flat
+
+    def on_free(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Whether each world point lies on a known-free cell (not a wall, not unknown)."""
+        r, c = self.geom.to_cell(x, y)
+        ok = self.geom.inside(r, c)
+        out = np.zeros(np.shape(r), dtype=bool)
+        out[ok] = self.known_free[r[ok], c[ok]]
+        return out
+
+    def crosses_wall(self, x0: float, y0: float, angles: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+        """Whether each ray from (x0, y0) meets an occupied cell within its length (m), by
+        sphere tracing on the distance field: a ray advances by the distance to the nearest
+        wall less one cell, at least half a cell, so it cannot step over a wall."""
+        res = self.geom.resolution
+        cos_a, sin_a = np.cos(angles), np.sin(angles)
+        t = np.zeros(len(angles))
+        hit = np.zeros(len(angles), dtype=bool)
+        active = np.flatnonzero(lengths > 0)
+        for _ in range(MAX_TRACE_STEPS):
+            if active.size == 0:
+                break
+            d = self.distances(x0 + t[active] * cos_a[active], y0 + t[active] * sin_a[active])
+            inside = d < 0.5 * res
+            hit[active[inside]] = True
+            t[active] += np.maximum(d - res, 0.5 * res)
+            active = active[~inside & (t[active] < lengths[active])]
+        return hit
 
     def distances(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Distances at world points; outside the map counts as far from everything."""
