@@ -83,7 +83,10 @@ ETA_MIN_SPEED_MPS = 0.3
 SETTLE_NEAR_GOAL_M = 3.5  # with the goal itself taken by people, this close counts as arrived (m);
 #   a standing person stops the robot 2.4-3.1 m away (legs padding, inscribed radius, forward check)
 GOAL_TAKEN_CLEAR_M = 1.0  # people on the goal: plan as if this much around it were free (m)
-KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest
+KEEP_PATH_RATIO = 0.85  # switch to a fresh plan only if it is this much shorter than the rest...
+SWITCH_BLOCKED_AHEAD_M = 2.0  # ... or the path is blocked this near ahead (m): farther off, a mark
+#   seen from here and lost from there (a person behind a pillar) flipped the plan between
+#   three routes every second, and the robot never got anywhere (issue #20, the sandbox)
 STEP_AWAY_M = 0.5  # longest step away from an obstacle the robot stands too close to (m)
 STEP_AWAY_CLEAR_M = 0.05  # step away until this much beyond the inscribed radius (m)
 STEP_AWAY_SPEED_MPS = 0.15
@@ -287,10 +290,12 @@ class GoalRun:
         return lost_since
 
     def _switch(self, ctl: PurePursuit, fresh: Plan) -> bool:
-        """Keep following the current path while it is still free and not much longer than the
-        fresh one (so the robot does not flip sides around a person at every replan)."""
+        """Keep following the current path while it is free for the next
+        :data:`SWITCH_BLOCKED_AHEAD_M` and not much longer than the fresh one (so the robot does
+        not flip sides around a person at every replan, nor between routes round pillars that
+        hide a person from one pose and show them from the next)."""
         rest = ctl.path[ctl._i:]
-        if path_blocked(self.node.global_cm, rest, math.inf):
+        if path_blocked(self.node.global_cm, rest, SWITCH_BLOCKED_AHEAD_M):
             return True
         return fresh.length_m < KEEP_PATH_RATIO * ctl.remaining_m()
 
