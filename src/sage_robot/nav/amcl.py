@@ -370,12 +370,13 @@ def scan_fit(field: LikelihoodField, pose: tuple[float, float, float], sensor: t
     """Localization health: of the scan's returns the map can judge, the fraction (0..1) that
     land within ``tolerance_m`` of a mapped obstacle when the scan is placed at ``pose``.
 
-    A return that ends on known-free floor with no mapped wall before it along its beam hit
-    something the map does not have (a person, a box, a chair): it says nothing about the
-    pose and is not judged, so a crowd round the robot, or a hall whose few mapped walls are
-    far (most returns then come from people), leaves the score where the walls put it. A
-    return past a mapped wall, or in space the map does not know, counts against: a wrong
-    pose lowers the score a lot. NaN when fewer than :data:`MIN_JUDGED_RETURNS` can be judged."""
+    A return that ends on known-free floor, :data:`UNMAPPED_FROM_WALL_M` or more from every
+    mapped wall, with no mapped wall before it along its beam, hit something the map does not
+    have (a person, a box, a chair): it says nothing about the pose and is not judged, so a
+    crowd round the robot, or a hall whose few mapped walls are far (most returns then come
+    from people), leaves the score where the walls put it. A return past a mapped wall, near
+    one, or in space the map does not know counts against: a wrong pose lowers the score a
+    lot. NaN when fewer than :data:`MIN_JUDGED_RETURNS` can be judged."""
     ok = np.isfinite(ranges) & (ranges > 0) & (ranges < range_max)
     if not ok.any():
         return float("nan")

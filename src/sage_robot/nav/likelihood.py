@@ -22,7 +22,8 @@ from sage_robot.nav.costmap import OCCUPIED_MIN, GridGeometry
 SIGMA_HIT_M = 0.2  # AMCL laser_sigma_hit
 Z_HIT, Z_RAND = 0.5, 0.5  # AMCL laser_z_hit / laser_z_rand
 LIKELIHOOD_MAX_DIST_M = 2.0  # AMCL laser_likelihood_max_dist
-MAX_TRACE_STEPS = 400  # a traced ray gives up after this many steps (12 m at half a 0.05 m cell: 480)
+MAX_TRACE_STEPS = 400  # a traced ray gives up after this many steps and counts as clear (a ray
+#   grazing a wall moves half a cell a step: 12 m at 0.05 m cells would take 480)
 BEAM_TEMPER = 0.2  # beams are not independent: log-likelihoods are scaled by this
 
 

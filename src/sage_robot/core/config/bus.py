@@ -16,7 +16,8 @@ ONE_POOL_RUNTIME = "(rx: (handover: app), acc: (handover: app), tx: (handover: a
 # Streams that repeat themselves while the robot stands still (odometry, the map->odom
 # correction, localization's verdict, the simulated speaker): a message equal to the last one
 # sent to other processes but for its stamp goes again only after this long (s, of its stamps).
-# Every change goes at once. Odometry keeps 10 Hz for ROS 2 tools' TF lookups.
+# Every change goes at once. Odometry keeps 4 Hz at rest for ROS 2 tools' TF lookups (it was
+# 10 Hz: the navigator's process then woke 5 times a second more at rest; issue #24).
 MAX_REPEAT_EVERY_S = 5.0  # a held-back stream still says it is alive this often (s)
 DEFAULT_REPEAT_EVERY_S: dict[str, float] = {
     "/odom": 0.25,
