@@ -260,3 +260,29 @@ def test_the_collision_guard_holding_the_robot_blocks_the_way() -> None:
     assert _guard_hold(1.0 + GUARD_BLOCKED_S / 2, 0.3, 0.0, since) == 1.0
     with pytest.raises(Blocked, match="within a few centimetres"):
         _guard_hold(1.0 + GUARD_BLOCKED_S, 0.3, 0.0, since)
+
+
+def test_a_goal_that_gets_no_closer_is_given_up_in_bounded_time() -> None:
+    # On the TurtleBot sandbox a robot among five people drove to and fro between two routes
+    # round the pillars for 300 s: every metre it moved reset the recovery ladder. A goal that
+    # gets no PROGRESS_M closer than ever before for NO_PROGRESS_S is now given up, with the
+    # ladder's reason; getting a metre closer starts the time again.
+    from sage_robot.core.actions import ActionAborted
+    from sage_robot.nav.costmap import Costmap
+    from sage_robot.nav.drive import NO_PROGRESS_S, PROGRESS_M, GoalRun, Target
+
+    host = _Host(Costmap.from_grid(room(6.0, 3.0, RES), 0.25, 0.55, 3.0), (1.0, 1.5, 0.0), False)
+    run = GoalRun(host, Target("ROOM_B", "room b", (5.0, 1.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type, unused-ignore]
+    to_and_fro = [(1.0, 1.5, 0.0), (1.3, 0.2, 0.0), (1.3, 2.8, 0.0)]  # metres apart, never 1 m closer
+    t = 0.0
+    while t <= NO_PROGRESS_S:
+        run._check_progress(to_and_fro[int(t) % 3])
+        host.clock._now = t = t + 1.0
+    with pytest.raises(ActionAborted, match=r"room b.*no closer in 180 s"):
+        run._check_progress(to_and_fro[0])
+    # a metre closer every so often: never given up
+    run = GoalRun(host, Target("ROOM_B", "room b", (5.0, 1.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type, unused-ignore]
+    for k in range(4):
+        for _ in range(int(NO_PROGRESS_S)):
+            run._check_progress((1.0 + k * (PROGRESS_M + 0.01), 1.5, 0.0))
+            host.clock._now += 1.0

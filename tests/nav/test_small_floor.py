@@ -152,7 +152,7 @@ async def test_a_person_seen_between_pillars_does_not_flip_the_plan_for_good(tmp
     # second between three routes (3.5 m west, 5.6 m south, 7.2 m round the east) and the robot
     # gave up 2.5 m from its start, "blocked ... I found no way around it". The path is now
     # dropped only when it is blocked within SWITCH_BLOCKED_AHEAD_M (or a fresh plan is much
-    # shorter): the robot gets there and stops beside the person.
+    # shorter): the robot gets there, beside the person.
     from sage_robot.core.mapio import read_map
 
     grid = read_map(shared_data("maps/tb3-sandbox/tb3_sandbox.yaml"))
@@ -164,7 +164,10 @@ async def test_a_person_seen_between_pillars_does_not_flip_the_plan_for_good(tmp
         handle = await bus.actions.send_goal(topics.NAVIGATE_TO, NavigateGoal(place="GOAL"))
         result = await asyncio.wait_for(handle.result(), REAL_TIMEOUT_S)
     assert result.ok, result.message
-    assert "standing at the spot" in result.value.reason, result.value.reason
+    # (since session 20 the robot hugs its path round the pillars and reaches the goal itself,
+    # beside the person; before, it settled short of it)
+    reason = result.value.reason
+    assert not reason or "standing at the spot" in reason, reason
     assert math.hypot(sim.pose[0] - goal[0], sim.pose[1] - goal[1]) < BESIDE_THE_PERSON_M
     assert sim.collisions == 0
 

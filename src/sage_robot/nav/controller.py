@@ -9,8 +9,10 @@ to 0.3 m ahead, below ``COST_SCALING_DIST_M``: through a gap only 0.1 m wider th
 creeps at ``MIN_REGULATED_SPEED_MPS``), near the goal, and to the speed-zone limit. When the
 carrot is too far off to the side the robot rotates in place. The arc is checked
 ``COLLISION_HORIZON_S`` ahead on the costmap; a collision means stop and report ``blocked``
-(after turning in place toward a near carrot, if the robot did not face it). The forward speed
-is never negative (the seed's robot never reverses).
+(after turning in place toward a near carrot, if the robot did not face it). Where even a short
+carrot's arc cuts the bend of a gap a few centimetres wider than the robot, the robot turns in
+place toward a nearer carrot and drives to it (``HUG_LOOKAHEADS_M``). The forward speed is
+never negative (the seed's robot never reverses).
 
 Conventions: map frame, metres, radians; the path is an (N, 2) array of (x, y).
 """
@@ -42,6 +44,13 @@ MIN_LOOKAHEAD_M = 0.3
 CLOSE_LOOKAHEAD_M = 0.4  # fallback carrot when the full-lookahead arc would collide (m)
 CLOSE_HOLD_M = 0.4  # once on the fallback carrot, keep to it for this much of the path (m)
 FACE_ALIGNED_RAD = 0.15  # blocked, the robot turns toward the short carrot until this near (rad)
+# Where even the short carrot's arc cuts a corner (a gap a few centimetres wider than the robot,
+# bending round a pillar: the TurtleBot sandbox, issue #20), the carrot comes nearer still, to
+# the first of these distances (m) the straight line to which is free, and the robot turns in
+# place to face it within HUG_ALIGNED_RAD before it drives on: it then follows the path itself.
+HUG_LOOKAHEADS_M = (0.3, 0.2, 0.1)
+HUG_ALIGNED_RAD = 0.1
+HUG_STRAIGHT_RAD = 0.03  # ... and where that arc is not free, within this to drive straight (rad)
 
 
 @dataclass(frozen=True)
@@ -77,6 +86,8 @@ class PurePursuit:
         self._at_goal_xy = False
         self._turn = 0.0  # the way it last rotated in place toward the carrot (+1, -1; 0 none)
         self._close_until = 0  # path index up to which the short carrot is used
+        self._hug_until = 0  # ... and the nearest carrots first (HUG_LOOKAHEADS_M)
+        self._hug_look: tuple[float, int] = (0.0, -1)  # the carrot distance hugged, and at which path index
         seg = np.hypot(*np.diff(self.path, axis=0).T) if len(self.path) > 1 else np.array([0.05])
         self._spacing = max(float(np.median(seg)), 1e-3)
 
@@ -107,15 +118,58 @@ class PurePursuit:
             self._at_goal_xy = True
             return self._align(th)
         if self._i < self._close_until:  # hugging the path: stay on the short carrot a while
-            return self._face_if_blocked(pose, self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap))
+            return self._close(pose, dist_goal, costmap)
         lookahead = max(MIN_LOOKAHEAD_M, min(self._lookahead(pose, costmap), dist_goal))
         cmd = self._pursue(pose, lookahead, dist_goal, costmap)
         if cmd.blocked:
             # the long arc cuts a corner the path goes around: hug the path with a short carrot
             # (and keep to it for CLOSE_HOLD_M, or the two carrots can turn the robot to and fro)
-            cmd = self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap)
             self._close_until = self._i + max(1, round(CLOSE_HOLD_M / self._spacing))
-        return self._face_if_blocked(pose, cmd)
+            return self._close(pose, dist_goal, costmap)
+        return cmd
+
+    def _close(self, pose: tuple[float, float, float], dist_goal: float, costmap: Costmap | None) -> Command:
+        """Follow the path closely: the short carrot's arc; where that cuts a corner too, the
+        nearest carrots (:meth:`_hug`), and keep to them a while (CLOSE_HOLD_M: the two ways
+        can turn the robot to and fro); failing both, turn toward the short carrot."""
+        hugging = self._i < self._hug_until
+        cmd = Command(0.0, 0.0, blocked=True)
+        if not hugging:
+            cmd = self._pursue(pose, CLOSE_LOOKAHEAD_M, dist_goal, costmap)
+            if not cmd.blocked or costmap is None:
+                return cmd
+        hug = self._hug(pose, dist_goal, costmap) if costmap is not None else None
+        if hug is not None:
+            self._hug_until = self._i + max(1, round(CLOSE_HOLD_M / self._spacing))
+            return hug
+        return cmd if hugging else self._face_if_blocked(pose, cmd)
+
+    def _hug(self, pose: tuple[float, float, float], dist_goal: float, costmap: Costmap) -> Command | None:
+        """Where the path itself is free for CLOSE_LOOKAHEAD_M: the farthest of the
+        HUG_LOOKAHEADS_M carrots the straight line to which is free; turn in place to face it,
+        then take the arc there, or drive straight where the arc is not free. The carrot is kept
+        while the robot turns (the scan's marks change as it turns: a carrot that came and went
+        turned it to and fro). None when the path is blocked or no line is free."""
+        x, y, th = pose
+        ahead = self.path[self._i:self._i + max(1, round(CLOSE_LOOKAHEAD_M / self._spacing)) + 1]
+        if costmap.blocked(ahead).any():
+            return None
+        kept = self._hug_look[0] if self._hug_look[1] == self._i else None
+        for look in HUG_LOOKAHEADS_M if kept is None else (kept, *HUG_LOOKAHEADS_M):
+            carrot = self._carrot(x, y, look)
+            if self._line_collides(pose, carrot, costmap):
+                continue
+            self._hug_look = (look, self._i)
+            err = wrap_angle(math.atan2(carrot[1] - y, carrot[0] - x) - th)
+            if abs(err) <= HUG_ALIGNED_RAD:
+                cmd = self._pursue(pose, look, dist_goal, costmap)
+                if not cmd.blocked:
+                    return cmd
+            if abs(err) > HUG_STRAIGHT_RAD:
+                return Command(0.0, math.copysign(min(ROTATE_SPEED_RADPS, self.params.max_w), err),
+                               rotating=True)
+            return Command(self._regulate(self.params.max_v, 0.0, dist_goal, pose, costmap), 0.0)
+        return None
 
     def _lookahead(self, pose: tuple[float, float, float], costmap: Costmap | None) -> float:
         """The carrot distance: ``lookahead_m``, shortened in tight places (clearance beyond the
@@ -224,12 +278,27 @@ class PurePursuit:
             x += v * math.cos(th) * dt
             y += v * math.sin(th) * dt
             pts.append((x, y))
-        arr = np.array(pts)
-        hit = costmap.blocked(arr)
-        if not hit.any():
-            return False
-        closer = np.array([costmap.distance_at(px, py) < here - 1e-3 for px, py in arr[hit]])
-        return bool(closer.any() or here > costmap.inscribed_m)
+        return _hits(np.array(pts), here, costmap)
+
+    @staticmethod
+    def _line_collides(pose: tuple[float, float, float], to: np.ndarray, costmap: Costmap) -> bool:
+        """Whether driving straight from ``pose`` to ``to`` collides (as :meth:`_collides`)."""
+        x, y, _ = pose
+        length = math.hypot(to[0] - x, to[1] - y)
+        n = max(1, math.ceil(length / COLLISION_STEP_M))
+        t = np.arange(1, n + 1)[:, None] / n
+        here = np.array([x, y])
+        return _hits(here + t * (np.asarray(to[:2]) - here), costmap.distance_at(x, y), costmap)
+
+
+def _hits(points: np.ndarray, here: float, costmap: Costmap) -> bool:
+    """Whether (N, 2) points ahead of a robot whose clearance is ``here`` (m) collide: a point in
+    collision counts unless the robot is already that close and gets no closer there."""
+    hit = costmap.blocked(points)
+    if not hit.any():
+        return False
+    closer = np.array([costmap.distance_at(px, py) < here - 1e-3 for px, py in points[hit]])
+    return bool(closer.any() or here > costmap.inscribed_m)
 
 
 ESCAPE_STEP_RAD = math.radians(15.0)  # headings tried when stepping away from an obstacle

@@ -65,6 +65,14 @@ if TYPE_CHECKING:
 LOCALIZED_WAIT_S = 10.0  # wait this long for a first pose before giving up
 GUARD_BLOCKED_S = 2.0  # the collision guard holding the robot this long blocks the way (s)
 PROGRESS_RESET_M = 1.0  # driving this far after a recovery resets the recovery ladder
+# A goal that has not got PROGRESS_M closer to its goal than ever before (along its path, or in
+# a straight line) for NO_PROGRESS_S (or 3 x nav.people_wait_s, if longer) is given up, with
+# the reason the ladder knows: in a crowd the ladder reset whenever the robot had moved a metre,
+# and on the TurtleBot sandbox a robot drove to and fro between two routes round the pillars for
+# 300 s (issue #20). Each new best is a metre nearer, so a goal's time is bounded. (120 s cut
+# legs that arrived after 176 s there: waiting for people, 60 s, comes on top of driving.)
+PROGRESS_M = 1.0
+NO_PROGRESS_S = 180.0
 CLEAR_SETTLE_S = 0.5  # after clearing the costmaps, let fresh scans come in (s)
 PLAN_DROP_WAIT_S = 5.0  # bound on waiting for a plan in flight when a drive ends (s)
 PLAN_LATENCY_S = 0.25  # time a plan may take (a Jetson's planner on a building map, as Nav2's
@@ -131,6 +139,8 @@ class GoalRun:
         self._last_xy: tuple[float, float] | None = None
         self._level = 0
         self._level_xy: tuple[float, float] | None = None
+        self._best = (math.inf, math.inf)  # least path left and straight distance to the goal so far (m)
+        self._best_at = 0.0  # when either last became PROGRESS_M less (clock s)
         self._waited_s = 0.0  # waited for people since the ladder last reset (s)
         self._asked_at = -math.inf  # when "excuse me" was last said on this goal (clock s)
         self._cleared = False  # the last wait ended because the path looked free
@@ -148,6 +158,7 @@ class GoalRun:
         self._feedback(fb)
 
     def _track(self, pose: tuple[float, float, float]) -> None:
+        self._check_progress(pose)
         if self._last_xy is not None:
             self.travelled += math.hypot(pose[0] - self._last_xy[0], pose[1] - self._last_xy[1])
         self._last_xy = (pose[0], pose[1])
@@ -155,6 +166,19 @@ class GoalRun:
                 math.hypot(pose[0] - self._level_xy[0], pose[1] - self._level_xy[1]) > PROGRESS_RESET_M:
             self._level, self._level_xy = 0, None
             self._waited_s, self._cleared = 0.0, False
+
+    def _check_progress(self, pose: tuple[float, float, float]) -> None:
+        """Note a new best (PROGRESS_M nearer the goal); raise ActionAborted after NO_PROGRESS_S
+        without one."""
+        gx, gy, _ = self.target.pose
+        left = self.remaining if self.remaining > 0.0 else math.inf  # (no path followed yet)
+        straight = math.hypot(pose[0] - gx, pose[1] - gy)
+        now = self.clock.now()
+        if left < self._best[0] - PROGRESS_M or straight < self._best[1] - PROGRESS_M or \
+                self._best[1] == math.inf:
+            self._best, self._best_at = (min(left, self._best[0]), min(straight, self._best[1])), now
+        elif now - self._best_at > (limit := max(NO_PROGRESS_S, 3.0 * self.node.settings.nav.people_wait_s)):
+            raise ActionAborted(f"{self._why_blocked()} (I got no closer in {limit:.0f} s)")
 
     def pose(self) -> tuple[float, float, float]:
         pose = self.node.pose()
@@ -310,6 +334,7 @@ class GoalRun:
         if why == "relocalized":
             return ""
         pose = self.pose()
+        self._check_progress(pose)
         self._level_xy = (pose[0], pose[1])
         level, self._level = self._level, self._level + 1
         if level == 2 and self._cleared and self._waited_s < self.node.settings.nav.people_wait_s:
