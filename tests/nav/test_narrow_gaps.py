@@ -278,7 +278,7 @@ def test_a_goal_that_gets_no_closer_is_given_up_in_bounded_time() -> None:
     while t <= NO_PROGRESS_S:
         run._check_progress(to_and_fro[int(t) % 3])
         host.clock._now = t = t + 1.0
-    with pytest.raises(ActionAborted, match=r"room b.*no closer in 180 s"):
+    with pytest.raises(ActionAborted, match=r"room b.*no closer in 300 s"):
         run._check_progress(to_and_fro[0])
     # a metre closer every so often: never given up
     run = GoalRun(host, Target("ROOM_B", "room b", (5.0, 1.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type, unused-ignore]
