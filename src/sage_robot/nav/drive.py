@@ -1,7 +1,8 @@
 """Driving one goal: plan, follow, replan, recover — the behaviour tree of Nav2 in plain code.
 
 Recoveries run in order, each once, when the robot is blocked (no plan, or the forward
-collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder:
+collision check stops it); moving ``PROGRESS_RESET_M`` resets the ladder, and a goal that gets
+no ``PROGRESS_M`` closer than ever before for ``NO_PROGRESS_S`` is given up with its reason:
 
 1. clear the costmaps and replan;
 2. wait for people: publish an Event ``blocked_by_people`` (the voice says "excuse me"),
