@@ -131,7 +131,8 @@ class PurePursuit:
     def _close(self, pose: tuple[float, float, float], dist_goal: float, costmap: Costmap | None) -> Command:
         """Follow the path closely: the short carrot's arc; where that cuts a corner too, the
         nearest carrots (:meth:`_hug`), and keep to them a while (CLOSE_HOLD_M: the two ways
-        can turn the robot to and fro); failing both, turn toward the short carrot."""
+        can turn the robot to and fro); failing both, turn toward the short carrot, or, once
+        hugging, report blocked (that turn and the hug's alternated for good)."""
         hugging = self._i < self._hug_until
         cmd = Command(0.0, 0.0, blocked=True)
         if not hugging:
