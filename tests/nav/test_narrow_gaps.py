@@ -210,6 +210,39 @@ async def test_backs_off_from_an_obstacle_in_front_only_where_allowed(allow_reve
     assert all(v <= 0 and w == 0 for v, w in host.cmds)
 
 
+async def test_steps_away_from_a_pillar_it_stopped_barely_clear_of() -> None:
+    """Stopped 1.5 cm beyond the inscribed radius of a pillar's corner, its path bending round
+    the pillar: every arc toward the path grazed the pillar's inscribed zone, so the forward
+    check stopped each one, and the robot (it never reverses) stood there until the ladder gave
+    up, "I could not get past (-1.3, -1.5), nothing there moved" (the TurtleBot sandbox, session
+    21). Before each rung it now steps away to STEP_AWAY_CLEAR_M beyond that radius, forward
+    only, never closer to anything."""
+    from sage_robot.nav.costmap import Costmap
+    from sage_robot.nav.drive import STEP_AWAY_CLEAR_M, STEP_AWAY_M, GoalRun, Target
+
+    g = room(6.0, 6.0, RES)
+    _box(g, 2.85, 2.85, 3.15, 3.15)  # a pillar 0.3 m across
+    cm = Costmap.from_grid(g, 0.25, 0.55, 3.0)
+    start = (2.84, 2.84 - 0.25 - 0.015, 2.41)  # below its south-west corner, facing north-west
+    assert cm.inscribed_m < cm.distance_at(*start[:2]) < cm.inscribed_m + STEP_AWAY_CLEAR_M
+    host = _Host(cm, start, allow_reverse=False)
+    run = GoalRun(host, Target("", "the goal", (2.0, 4.5, 0.0)), lambda _fb: None)  # type: ignore[arg-type, unused-ignore]
+    clear = []
+    host_command = host.command
+
+    def command(v: float, w: float) -> float:
+        clear.append(cm.distance_at(*host.pose()[:2]))
+        return host_command(v, w)
+
+    host.command = command  # type: ignore[method-assign]
+    await run._step_away()
+    x, y, _ = host.pose()
+    assert cm.distance_at(x, y) >= cm.inscribed_m + STEP_AWAY_CLEAR_M - 0.01
+    assert math.hypot(x - start[0], y - start[1]) <= STEP_AWAY_M + 0.01
+    assert all(v >= 0 for v, _ in host.cmds)
+    assert min(clear) >= cm.distance_at(*start[:2]) - 1e-3  # never closer to anything
+
+
 class _Clock(SimClock):
     """A SimClock nobody steps: sleeping advances it."""
 

@@ -153,6 +153,52 @@ def test_a_walker_held_up_by_the_robot_turns_away_on_a_map_without_lanes(model: 
     assert walker.x < 7.0
 
 
+@needs_jps
+def test_people_wedged_in_a_narrow_gap_give_up_and_go_elsewhere() -> None:
+    """Three walkers meet in a 0.7 m gap in a wall and wedge. JuPedSim's agents then jitter in
+    place, millimetres to and fro every tick, so the speed of one tick never said "stuck", and
+    they stood there for good (on the TurtleBot sandbox four people stood 200 s between the
+    pillars, and the robot waited for them). Now each gives its goal up and walks on."""
+    grid = room(8.0, 4.0)
+    fill(grid, 4.0, 0.0, 4.2, 1.65)
+    fill(grid, 4.0, 2.35, 4.2, 4.0)
+    people = [PersonState(0, 2.0, 2.0, behaviour="walker", speed_mps=1.0, route=[(7.0, 2.0)]),
+              PersonState(1, 6.0, 2.05, behaviour="walker", speed_mps=1.0, route=[(1.0, 2.0)]),
+              PersonState(2, 6.5, 1.8, behaviour="walker", speed_mps=1.0, route=[(1.0, 2.0)])]
+    world = _world(grid, (0.8, 3.5, 0.0), people, "jupedsim", seed=1)
+    _run(world, 5.0)
+    jammed = [(p.x, p.y) for p in people]
+    assert all(math.hypot(x - 4.1, y - 2.0) < 0.8 for x, y in jammed), f"no jam at the gap: {jammed}"
+    farthest = [0.0] * len(people)
+
+    def note(w: World) -> None:
+        for i, p in enumerate(w.crowd.people):
+            farthest[i] = max(farthest[i], math.hypot(p.x - jammed[i][0], p.y - jammed[i][1]))
+
+    _run(world, 25.0, note)
+    assert min(farthest) > 0.5, f"someone stayed wedged: farthest from the jam {farthest} m"
+
+
+@pytest.mark.parametrize("model", BACKENDS)
+def test_a_walker_whose_way_aside_leads_past_the_robot_does_not_stand_there_for_good(model: str) -> None:
+    """Asked aside, a walker right in front of the robot was given a spot behind it: the way
+    there passes the robot, which nobody walks into, so the walker stood at the robot's front
+    for good (its turn-back route came after the way aside). Now it gives that way up."""
+    walker = PersonState(0, 3.65, 2.0, behaviour="walker", speed_mps=1.0, route=[(3.65, 2.0)])
+    world = _world(room(6.0, 4.0), (3.0, 2.0, 0.0), [walker], model, seed=2)
+    world.crowd.send_aside(walker, [(1.5, 2.0)])
+    moved, near = [], []
+
+    def note(_w: World) -> None:
+        moved.append(math.hypot(walker.x - 3.65, walker.y - 2.0))
+        near.append(math.hypot(walker.x - 3.0, walker.y - 2.0))
+
+    _run(world, 30.0, note)
+    assert not walker.aside
+    assert max(moved) > 1.0, f"the walker stood at the robot's front: at most {max(moved):.2f} m from there"
+    assert min(near) >= BODY_CONTACT_M, "the walker walked into the robot"
+
+
 # ---------------------------------------------------------------- the doorway
 def _doorway(model: str, ignore_share: float = 0.0) -> World:
     """Two rooms (12 m x 6 m in all) joined by a 1 m doorway at x 6.0-6.2, y 2.5-3.5; someone

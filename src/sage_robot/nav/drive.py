@@ -22,9 +22,9 @@ keeps right, plans around groups, and pulls over for a crowd in a narrow corrido
 Where ``robot.allow_reverse`` is true, a robot stopped close in front of an obstacle first
 backs off (at most ``BACKUP_M``, slowly, only onto floor that is clear behind it).
 
-Before each rung, a robot that stands within the inscribed radius of an obstacle (the
-forward check stops every arc that gets closer, and it never reverses) first turns toward
-open floor and creeps clear (at most ``STEP_AWAY_M``).
+Before each rung, a robot that stands within the inscribed radius of an obstacle, or barely
+beyond it (the forward check stops every arc that gets closer or grazes it, and it never
+reverses), first turns toward open floor and creeps clear (at most ``STEP_AWAY_M``).
 
 From step 3 on (waiting for people has failed), a robot within ``SETTLE_NEAR_GOAL_M`` of
 a goal that the latest scan shows something standing on settles there instead (succeeded,
@@ -509,12 +509,14 @@ class GoalRun:
                 self._blocker_moved = True
 
     async def _step_away(self) -> None:
-        """Standing within the inscribed radius of an obstacle (every arc toward the path gets
-        closer, so the forward check stops it, and the robot never reverses): turn toward the
-        heading that leads away, and creep until clear, at most STEP_AWAY_M."""
+        """Standing within the inscribed radius of an obstacle, or less than STEP_AWAY_CLEAR_M
+        beyond it (every arc toward the path gets closer, or grazes the radius round a
+        pillar's corner, so the forward check stops it, and the robot never reverses): turn
+        toward the heading that leads away, and creep until STEP_AWAY_CLEAR_M clear, at most
+        STEP_AWAY_M."""
         node, pose = self.node, self.pose()
         cm = node.local_cm
-        if cm is None or cm.distance_at(pose[0], pose[1]) >= cm.inscribed_m:
+        if cm is None or cm.distance_at(pose[0], pose[1]) >= cm.inscribed_m + STEP_AWAY_CLEAR_M:
             return
         gx, gy, _ = self.target.pose
         heading = escape_heading(cm, pose, STEP_AWAY_M, math.atan2(gy - pose[1], gx - pose[0]))

@@ -328,8 +328,11 @@ class Crowd:
         """Give up waiting for the robot: back along the lane it came by (walkers on lanes), or,
         on a map without lanes, off to another spot on its own side of the robot (it used to
         keep waiting there, in the robot's way, while the robot waited for it; JuPedSim's
-        guard stops people short of the robot, so they never got round it)."""
+        guard stops people short of the robot, so they never got round it). A way aside that
+        leads past the robot is given up too: it came before the new route, and a person asked
+        aside stood for good at the goal the robot waited to reach (measured on the sandbox)."""
         p.waited_s = 0.0
+        p.aside.clear()
         if p.behaviour != "walker" or p.patrol:
             return
         if self.lanes is None:

@@ -45,8 +45,11 @@ JPS_STEP_S = 0.01  # JuPedSim's fixed time step (s); the world's dt is spent in 
 ROBOT_AGENT_MPS = 5.0  # the robot's agent may move this fast to keep up with the true pose
 CORNER_M = 0.3  # a routed corner counts as passed this close (m)
 GUARD_STEPS = 3  # a person within this many of their steps of the robot's body waits
-STUCK_S = 6.0  # a person with a goal who has not moved for this long gives the goal up
-STUCK_MPS = 0.05
+STUCK_S = 6.0  # a person with a goal who has not got STUCK_M anywhere for this long gives it up
+STUCK_M = 0.1  # ... measured from where they stood: JuPedSim's agents can jitter in place, a few
+# millimetres to and fro every tick, wedged between a pillar, others and the robot (measured on
+# the TurtleBot sandbox: four people 200 s in one spot at 0.2-1.2 m/s a tick), so the speed of
+# one tick does not say that someone gets anywhere
 PART_RINGS_CELLS = 0.25  # the walkable polygon is widened by this many cells (see below)
 MIN_HOLE_M2 = 0.05  # holes in the walkable polygon smaller than this are dropped (specks)
 SIMPLIFY_M = 0.05  # the walkable polygon is simplified to this tolerance
@@ -127,6 +130,7 @@ class JpsCrowd(Crowd):
         self._agents = [self._place(p) for p in self.people]
         self._routes: dict[int, tuple[tuple[float, float], list[tuple[float, float]]]] = {}
         self._still_s = [0.0] * len(self.people)
+        self._anchor = [(p.x, p.y) for p in self.people]  # where each one stood when last counted moving
         self._owed_s = 0.0  # simulated time not yet spent in JuPedSim ticks
         self._inner: Any = None  # the polygon shrunk by INSIDE_M, made when first needed
 
@@ -252,7 +256,9 @@ class JpsCrowd(Crowd):
         p.x, p.y = x, y
         p.moving = moved / JPS_STEP_S
         p.phase = (p.phase + STRIDE_RATE * moved) % (2 * math.pi)
-        if goal is None or moved >= STUCK_MPS * JPS_STEP_S:
+        ax, ay = self._anchor[i]
+        if goal is None or math.hypot(x - ax, y - ay) >= STUCK_M:
+            self._anchor[i] = (x, y)
             self._still_s[i] = 0.0
             p.waited_s = 0.0
             return
