@@ -26,7 +26,7 @@ from sage_robot.core.config.bus import BusSettings, ZenohSettings
 from sage_robot.core.errors import ConfigError, SageError, ServiceError, ServiceTimeout, ServiceUnavailable
 from sage_robot.core.msgs import BatteryState, LaserScan, Odometry, Pose2D, PowerStatus, Text, Twist
 from sage_robot.core.transport import wire
-from sage_robot.core.transport.keys import check_topic, session_config, topic_key, topic_of
+from sage_robot.core.transport.keys import TX_QUEUE_KEY, check_topic, session_config, topic_key, topic_of
 from sage_robot.core.transport.remote import RemoteRobot
 from sage_robot.core.transport.zenoh_bus import ZenohTransport, repeats
 from tests.core.test_msgs import EXAMPLES
@@ -230,6 +230,18 @@ def test_zenohs_shared_memory_is_off_unless_the_profile_turns_it_on() -> None:
     assert session_config(ZenohSettings(), None, None).get_json("transport/shared_memory/enabled") == "false"
     on = session_config(ZenohSettings(shared_memory=True), None, None)
     assert on.get_json("transport/shared_memory/enabled") == "true"
+
+
+def test_a_link_queues_sixteen_messages_before_zenoh_drops_one(tmp_path: Path) -> None:
+    """Zenoh's default queue (2 batches, each message its own with express) dropped paced
+    /cmd_vel messages between processes on a busy machine (test_bench_zenoh catches it)."""
+    assert session_config(ZenohSettings(), None, None).get_json(TX_QUEUE_KEY) == "16"
+    assert session_config(ZenohSettings(tx_queue=4), None, None).get_json(TX_QUEUE_KEY) == "4"
+    conf = tmp_path / "zenoh.json5"
+    conf.write_text("{ transport: { link: { tx: { queue: { size: { data: 8 } } } } } }\n")
+    assert session_config(ZenohSettings(config_file=str(conf)), None, None).get_json(TX_QUEUE_KEY) == "8"
+    with pytest.raises(ValueError, match="tx_queue"):
+        ZenohSettings(tx_queue=17)
 
 
 async def test_a_service_of_another_process_is_called_through_the_bus(peer: tuple[str, int]) -> None:

@@ -40,6 +40,7 @@ from sage_robot.app.launcher import HEALTH_TOPIC, Launcher, NodeSpec
 from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import node_class
 from sage_robot.app.runtime import make_transport, run_launcher
+from sage_robot.core import event_loop
 from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.clock import Clock, SimClock, WallClock
 from sage_robot.core.clock_board import ClockBoard
@@ -229,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"sage group {args.group}: {refused}; running at the normal priority", file=sys.stderr)
     try:
         ctx, specs = build_context(args)
-        asyncio.run(run_group(ctx, specs, args.export_port, args.parent_pipe))
+        event_loop.run(run_group(ctx, specs, args.export_port, args.parent_pipe), fast=True)
     except (SageError, json.JSONDecodeError) as exc:
         print(f"sage group {args.group}: {exc}", file=sys.stderr)
         return 2

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from sage_robot.app.group_main import group_health_topic
-from sage_robot.core import topics
+from sage_robot.core import event_loop, topics
 from sage_robot.core.clock_board import ClockBoard
 from sage_robot.core.config import Settings
 from sage_robot.core.config.processes import CLOCK_GROUP, group_of
@@ -346,7 +346,7 @@ def run_processes(
         plans = plan_groups(settings, mode, nodes, connect, run_dir, profile, overrides)
 
         async def main() -> GroupSupervisor:
-            hub = ZenohHub(listen, settings.bus.robot_id)
+            hub = ZenohHub(listen, settings.bus.robot_id, settings.bus.zenoh.runtime)
             supervisor = GroupSupervisor(plans, hub)
             try:
                 await supervisor.run()
@@ -354,4 +354,4 @@ def run_processes(
                 hub.close()
             return supervisor
 
-        return asyncio.run(main())
+        return event_loop.run(main(), fast=True)

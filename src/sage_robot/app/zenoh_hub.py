@@ -14,12 +14,14 @@ import asyncio
 import contextlib
 import json
 import logging
+import os
 from collections.abc import Callable
 from typing import Any
 
+from sage_robot.core.config.bus import DEFAULT_TX_QUEUE, ONE_POOL_RUNTIME
 from sage_robot.core.errors import SageError
 from sage_robot.core.transport import wire
-from sage_robot.core.transport.keys import kind_key, open_session, topic_key
+from sage_robot.core.transport.keys import RUNTIME_ENV, TX_QUEUE_KEY, kind_key, open_session, topic_key
 
 _log = logging.getLogger("sage.process_groups.hub")
 
@@ -27,9 +29,11 @@ _log = logging.getLogger("sage.process_groups.hub")
 class ZenohHub:
     """A Zenoh router listening on ``endpoint``; subscribe and publish bus messages on it."""
 
-    def __init__(self, endpoint: str, robot_id: str = "sage") -> None:
+    def __init__(self, endpoint: str, robot_id: str = "sage", runtime: str = ONE_POOL_RUNTIME) -> None:
         import zenoh
 
+        if runtime:  # one thread pool, as the groups' sessions (before Zenoh starts its pools)
+            os.environ.setdefault(RUNTIME_ENV, runtime)
         self.endpoint, self.robot = endpoint, robot_id
         cfg = zenoh.Config()
         try:
@@ -37,6 +41,7 @@ class ZenohHub:
             cfg.insert_json5("scouting/multicast/enabled", "false")
             cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
             cfg.insert_json5("connect/endpoints", "[]")
+            cfg.insert_json5(TX_QUEUE_KEY, json.dumps(DEFAULT_TX_QUEUE))  # a stop on /cmd_vel must not drop
         except zenoh.ZError as exc:
             raise SageError(f"process groups: bad endpoint {endpoint!r}: {exc}") from None
         self.session = open_session(cfg, "process groups")
@@ -48,6 +53,8 @@ class ZenohHub:
 
     def subscribe(self, topic: str, callback: Callable[[Any], None]) -> None:
         """Call ``callback(msg)`` on the running event loop for each message on ``topic``."""
+        import zenoh
+
         loop = asyncio.get_running_loop()
 
         def on_sample(sample: Any) -> None:  # Zenoh's thread
@@ -60,7 +67,9 @@ class ZenohHub:
             with contextlib.suppress(RuntimeError):  # the loop closed: shutting down
                 loop.call_soon_threadsafe(callback, msg)
 
-        self._declared.append(self.session.declare_subscriber(topic_key(self.robot, topic), on_sample))
+        # On Zenoh's network thread, not a Python thread of its own: one hand-off less.
+        handler = zenoh.handlers.Callback(on_sample, indirect=False)
+        self._declared.append(self.session.declare_subscriber(topic_key(self.robot, topic), handler))
 
     def publish(self, topic: str, msg: Any) -> None:
         frame = wire.encode(msg)

@@ -37,7 +37,7 @@ from sage_robot.core.node import Node
 
 CLIENT_REPEAT_S = 0.1  # the page re-sends a held command this often (s); documented for pages
 DEADMAN_CHECK_S = 0.02  # how often the deadman (and the e-stop hold) looks while it has work (s)
-DEADMAN_IDLE_S = 0.1  # with no command standing and no e-stop: this often, or at the next command (s)
+DEADMAN_IDLE_S = 1.0  # no command, no e-stop: nothing to check; a bound, or at the next command (s)
 CANCEL_SERVICE_TIMEOUT_S = 1.0  # the e-stop's call of the navigator's cancel service (s)
 ESTOP_RECANCEL_S = 0.5  # while engaged, the cancel service is asked again this often if nav still runs (s)
 NAV_ACTIONS = (topics.NAVIGATE_TO, topics.TOUR)  # what the e-stop cancels

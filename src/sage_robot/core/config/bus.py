@@ -18,6 +18,10 @@ ONE_POOL_RUNTIME = "(rx: (handover: app), acc: (handover: app), tx: (handover: a
 # sent to other processes but for its stamp goes again only after this long (s, of its stamps).
 # Every change goes at once. Odometry keeps 4 Hz at rest for ROS 2 tools' TF lookups (it was
 # 10 Hz: the navigator's process then woke 5 times a second more at rest; issue #24).
+# Zenoh sends each message at once in a batch of its own (express), and a link queues 2 such
+# batches by default: a sending thread that is not scheduled for 1 ms then drops the next one.
+DEFAULT_TX_QUEUE = 16
+MAX_TX_QUEUE = 16  # Zenoh's limit (transport/link/tx/queue/size/*)
 MAX_REPEAT_EVERY_S = 5.0  # a held-back stream still says it is alive this often (s)
 DEFAULT_REPEAT_EVERY_S: dict[str, float] = {
     "/odom": 0.25,
@@ -51,6 +55,15 @@ class ZenohSettings(Section):
         description="Zenoh's shared-memory transport. SAGE's messages are plain bytes, which never "
         "use it; on, every process runs its 20 Hz watchdog thread (at rest the robot's processes "
         "took ~13 % more CPU: docs/benchmarks.md, the robot at rest).",
+    )
+    tx_queue: int = Field(
+        DEFAULT_TX_QUEUE,
+        ge=1,
+        le=MAX_TX_QUEUE,
+        description="Messages (batches) each link may queue at the data priority, where every topic "
+        "goes, before Zenoh drops one; a publisher waits at most 1 ms for room. Zenoh's default, 2, "
+        "lost 1-4 of 50 paced /cmd_vel messages between two processes on a busy machine "
+        "(docs/benchmarks.md); 16 lost none.",
     )
     config_file: str = Field(
         "",

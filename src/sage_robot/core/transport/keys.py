@@ -25,6 +25,7 @@ from sage_robot.core.errors import ConfigError, SageError
 TOPIC_NAME = re.compile(r"^(/[A-Za-z0-9_]+)+$")  # ROS names: no wildcards, no empty chunks
 PREFIX = "sage"
 RUNTIME_ENV = "ZENOH_RUNTIME"  # Zenoh reads its thread pools from here, once
+TX_QUEUE_KEY = "transport/link/tx/queue/size/data"  # batches a link queues at the data priority
 ANY_ADDRESS = re.compile(r"/(0\.0\.0\.0|\[::\]):")  # a listen address a tool cannot connect to
 
 
@@ -80,6 +81,8 @@ def session_config(z: ZenohSettings, listen: list[str] | None, connect: list[str
         keys["mode"] = z.mode
     if "multicast_scouting" in explicit:
         keys["scouting/multicast/enabled"] = z.multicast_scouting
+    if "tx_queue" in explicit:
+        keys[TX_QUEUE_KEY] = z.tx_queue
     if "shared_memory" in explicit:
         keys["transport/shared_memory/enabled"] = z.shared_memory
     if listen is not None or "listen" in explicit:
