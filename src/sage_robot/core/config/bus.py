@@ -13,15 +13,15 @@ ROBOT_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"  # one Zenoh key chunk, no wildcards
 # Zenoh's thread pools (its ZENOH_RUNTIME, RON): receiving, sending, accepting and the network
 # tasks all run on the one 'app' pool, so a message between processes wakes one thread, not three.
 ONE_POOL_RUNTIME = "(rx: (handover: app), acc: (handover: app), tx: (handover: app), net: (handover: app))"
+# Zenoh sends each message at once in a batch of its own (express), and a link queues 2 such
+# batches by default: a sending thread that is not scheduled for 1 ms then drops the next one.
+DEFAULT_TX_QUEUE = 16
+MAX_TX_QUEUE = 16  # Zenoh's limit (transport/link/tx/queue/size/*)
 # Streams that repeat themselves while the robot stands still (odometry, the map->odom
 # correction, localization's verdict, the simulated speaker): a message equal to the last one
 # sent to other processes but for its stamp goes again only after this long (s, of its stamps).
 # Every change goes at once. Odometry keeps 4 Hz at rest for ROS 2 tools' TF lookups (it was
 # 10 Hz: the navigator's process then woke 5 times a second more at rest; issue #24).
-# Zenoh sends each message at once in a batch of its own (express), and a link queues 2 such
-# batches by default: a sending thread that is not scheduled for 1 ms then drops the next one.
-DEFAULT_TX_QUEUE = 16
-MAX_TX_QUEUE = 16  # Zenoh's limit (transport/link/tx/queue/size/*)
 MAX_REPEAT_EVERY_S = 5.0  # a held-back stream still says it is alive this often (s)
 DEFAULT_REPEAT_EVERY_S: dict[str, float] = {
     "/odom": 0.25,
