@@ -9,6 +9,7 @@ from collections import Counter
 from collections.abc import Iterator
 from typing import Any
 
+import numpy as np
 import pytest
 
 pytest.importorskip("zenoh")
@@ -17,9 +18,9 @@ from sage_robot.core import topics
 from sage_robot.core.bus import Bus
 from sage_robot.core.clock import WallClock
 from sage_robot.core.config.bus import BusSettings, ZenohSettings
-from sage_robot.core.msgs import HealthReport, LaserScan
+from sage_robot.core.msgs import HealthReport, LaserScan, OccupancyGrid
 from sage_robot.core.transport.zenoh_bus import ZenohTransport
-from tests.core.zenoh_peer import SCAN_HZ, free_port, running_peer, unique_robot
+from tests.core.zenoh_peer import SCAN_HZ, big_map, free_port, running_peer, unique_robot
 from tests.support.waits import until
 
 QUIET_S = 10 / SCAN_HZ  # ten of the peer's scans: long enough to see one that should not come
@@ -54,6 +55,19 @@ async def test_a_process_that_starts_late_gets_a_latched_value_at_once(
     assert [n.name for n in report.nodes] == ["peer"]
     late = bus.subscribe(topics.HEALTH, HealthReport)  # a late subscriber here gets it too
     assert late.get_nowait() == report
+
+
+async def test_a_building_sized_latched_map_reaches_a_process_that_starts_late(
+    joined: tuple[Bus, ZenohTransport],
+) -> None:
+    """3.2 MB, fifty Zenoh batches, as the last value of a latched topic: the web process gets
+    the navigator's /map so (Zenoh's low-latency transport lost it: docs/benchmarks.md)."""
+    bus, _ = joined
+    bus.declare(topics.MAP)
+    await until(lambda: bus.latest(topics.MAP) is not None, "the peer's /map came", timeout=30)
+    grid = bus.latest(topics.MAP)
+    assert isinstance(grid, OccupancyGrid)
+    assert np.array_equal(grid.data, big_map().data)
 
 
 async def test_topics_nobody_here_reads_stay_away_and_want_all_brings_them(

@@ -2,10 +2,10 @@
 
 ``python tests/core/zenoh_peer.py ROBOT_ID PORT [CONNECT]``: a bus on the wall clock with a
 Zenoh transport listening on 127.0.0.1:PORT. It publishes a 360-beam ``/scan`` at
-:data:`SCAN_HZ` and the latched ``/sage/health`` once, answers every ``/cmd_vel`` it hears
-with ``/peer/heard`` (the speed as text), serves :data:`UPPER` and the action :data:`COUNT`,
-prints ``ready`` and runs
-until stdin closes (the test ends it) or :data:`MAX_RUN_S` passes. The operator password is
+:data:`SCAN_HZ`, the latched ``/sage/health`` and a building-sized latched ``/map`` once,
+answers every ``/cmd_vel`` it hears with ``/peer/heard`` (the speed as text), serves
+:data:`UPPER` and the action :data:`COUNT`, prints ``ready`` and runs until stdin closes
+(the test ends it) or :data:`MAX_RUN_S` passes. The operator password is
 ``$SAGE_OPERATOR_PASSWORD``.
 """
 
@@ -30,10 +30,11 @@ from sage_robot.core.actions import ActionAborted, GoalContext
 from sage_robot.core.bus import Bus, Topic
 from sage_robot.core.clock import WallClock
 from sage_robot.core.config.bus import BusSettings, ZenohSettings
-from sage_robot.core.msgs import HealthReport, LaserScan, NodeHealth, Text, Twist
+from sage_robot.core.msgs import HealthReport, LaserScan, NodeHealth, OccupancyGrid, Pose2D, Text, Twist
 from sage_robot.core.transport.zenoh_bus import ZenohTransport
 
 SCAN_HZ = 20.0
+MAP_SHAPE = (1600, 2000)  # rows, columns: the shipped building's grid
 SCAN_BEAMS = 360
 MAX_RUN_S = 120.0  # a forgotten peer ends by itself
 READY_S = 60.0  # bound on the peer's start (imports on a loaded machine)
@@ -45,6 +46,13 @@ COUNT = "peer_count"  # action: Text("N") -> feedback Text("1") .. Text("N"), re
 # "forever" counts until cancelled, "fail" aborts with "asked to fail"
 COUNT_STEP_S = 0.05
 PASSWORD = "peer-test-password"
+
+
+def big_map() -> OccupancyGrid:
+    """The latched /map the peer publishes once: as large as the shipped building's (2000 x 1600
+    cells, 3.2 MB), far more than one Zenoh batch (64 kB), with a pattern to check."""
+    data = (np.arange(MAP_SHAPE[0] * MAP_SHAPE[1], dtype=np.int64) % 101).astype(np.int8).reshape(MAP_SHAPE)
+    return OccupancyGrid(0.0, "map", 0.05, Pose2D(0.0, 0.0, 0.0), data)
 
 
 def free_port() -> int:
@@ -137,6 +145,7 @@ async def _serve(bus: Bus) -> None:
     bus.declare(topics.HEALTH, latched=True)
     bus.subscribe(topics.CMD_VEL, Twist, lambda m: bus.publish(HEARD, Text(f"{m.linear_x:g}")))
     bus.publish(topics.HEALTH, HealthReport(0.0, (NodeHealth("peer", "running", critical=True),)))
+    bus.publish(topics.MAP, big_map())
     bus.serve(UPPER, _upper)
     bus.actions.serve(COUNT, _count)
     ranges = np.linspace(0.5, 5.0, SCAN_BEAMS, dtype=np.float32)
