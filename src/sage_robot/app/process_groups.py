@@ -346,7 +346,8 @@ def run_processes(
         plans = plan_groups(settings, mode, nodes, connect, run_dir, profile, overrides)
 
         async def main() -> GroupSupervisor:
-            hub = ZenohHub(listen, settings.bus.robot_id, settings.bus.zenoh.runtime)
+            z = settings.bus.zenoh
+            hub = ZenohHub(listen, settings.bus.robot_id, z.runtime, z.tx_queue)
             supervisor = GroupSupervisor(plans, hub)
             try:
                 await supervisor.run()

@@ -29,7 +29,13 @@ _log = logging.getLogger("sage.process_groups.hub")
 class ZenohHub:
     """A Zenoh router listening on ``endpoint``; subscribe and publish bus messages on it."""
 
-    def __init__(self, endpoint: str, robot_id: str = "sage", runtime: str = ONE_POOL_RUNTIME) -> None:
+    def __init__(
+        self,
+        endpoint: str,
+        robot_id: str = "sage",
+        runtime: str = ONE_POOL_RUNTIME,
+        tx_queue: int = DEFAULT_TX_QUEUE,
+    ) -> None:
         import zenoh
 
         if runtime:  # one thread pool, as the groups' sessions (before Zenoh starts its pools)
@@ -41,7 +47,7 @@ class ZenohHub:
             cfg.insert_json5("scouting/multicast/enabled", "false")
             cfg.insert_json5("listen/endpoints", json.dumps([endpoint]))
             cfg.insert_json5("connect/endpoints", "[]")
-            cfg.insert_json5(TX_QUEUE_KEY, json.dumps(DEFAULT_TX_QUEUE))  # a stop on /cmd_vel must not drop
+            cfg.insert_json5(TX_QUEUE_KEY, json.dumps(tx_queue))  # a stop on /cmd_vel must not be dropped
         except zenoh.ZError as exc:
             raise SageError(f"process groups: bad endpoint {endpoint!r}: {exc}") from None
         self.session = open_session(cfg, "process groups")
