@@ -61,3 +61,7 @@ def test_the_service_unit_lets_the_motion_process_take_its_real_time_priority(tm
     assert "\nLimitRTPRIO=30\n" in custom
     assert "up --mode tour\n" in default
     assert f"--profile {profile.resolve()} up --mode tour --processes\n" in custom
+    # Zenoh's threads (processes.zenoh_realtime) need their priority too, when it is the highest
+    profile.write_text("processes:\n  realtime:\n    motion: 30\n  zenoh_realtime: 35\n")
+    assert main(["--profile", str(profile), "install-service", "--out", str(tmp_path / "c.service")]) == 0
+    assert "\nLimitRTPRIO=35\n" in (tmp_path / "c.service").read_text()

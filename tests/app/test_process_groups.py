@@ -27,6 +27,7 @@ from sage_robot.core.config.processes import DEFAULT_GROUPS, ProcessSettings, gr
 from sage_robot.core.errors import ConfigError
 from sage_robot.core.msgs import Event, Odometry
 from sage_robot.core.node import NodeState
+from sage_robot.core.transport.keys import ZENOH_THREADS
 from tests.support.sched import fifo_permitted
 from tests.support.waits import until
 
@@ -145,6 +146,16 @@ def test_a_killed_group_comes_back_alone_and_the_others_keep_their_pids(tmp_path
     asyncio.run(body())
 
 
+def _zenoh_threads(pid: int) -> set[str]:
+    """How a process's Zenoh threads are scheduled (one string per policy seen)."""
+    out = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{tid}/comm") as f:
+            if ZENOH_THREADS.match(f.read().strip()):
+                out.add(realtime.describe(int(tid)))
+    return out
+
+
 async def _crash_and_recover(sup: GroupSupervisor, odom: list[Odometry], events: list[Event]) -> None:
     g = sup.groups
     await until(lambda: all(p.state is NodeState.RUNNING for p in g.values()) and odom,
@@ -173,6 +184,12 @@ async def _crash_and_recover(sup: GroupSupervisor, odom: list[Odometry], events:
     # processes.realtime: motion at SCHED_FIFO 40 where the machine allows it (else it says why)
     assert realtime.describe(pids["motion"]) == ("SCHED_FIFO 40" if fifo_permitted() else "normal")
     assert realtime.describe(pids["aux"]) == "normal"
+    # processes.zenoh_realtime: every group's Zenoh threads at SCHED_FIFO 10, motion's kept at 40
+    zenoh_fifo = {g: _zenoh_threads(pid) for g, pid in pids.items()}
+    if fifo_permitted():
+        assert zenoh_fifo == {"sim": {"SCHED_FIFO 10"}, "motion": {"SCHED_FIFO 40"}, "aux": {"SCHED_FIFO 10"}}
+    else:
+        assert zenoh_fifo == {"sim": {"normal"}, "motion": {"normal"}, "aux": {"normal"}}
     os.kill(pids["aux"], signal.SIGKILL)
     t0 = time.monotonic()
     await until(lambda: g["aux"].state is NodeState.RUNNING and g["aux"].pid != pids["aux"], "aux back",

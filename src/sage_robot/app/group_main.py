@@ -49,7 +49,8 @@ from sage_robot.core.config import Settings, load_profile
 from sage_robot.core.errors import ConfigError, SageError
 from sage_robot.core.msgs import HealthReport
 from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
-from sage_robot.core.realtime import set_fifo
+from sage_robot.core.realtime import raise_threads, set_fifo
+from sage_robot.core.transport.keys import ZENOH_THREADS
 from sage_robot.hardware.mcu.bridge import PORT_READ_ELSEWHERE, PORT_RESOURCE
 
 GROUP_HEALTH_PREFIX = "/sage/group_health/"  # + group name: a group's launcher reports here
@@ -220,6 +221,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return p.parse_args(argv)
 
 
+def raise_zenoh_threads(group: str, priority: int) -> None:
+    """Zenoh's network threads (started with the bus's session) at ``processes.zenoh_realtime``."""
+    if not priority:
+        return
+    _raised, refused = raise_threads(priority, ZENOH_THREADS)
+    if refused:  # the robot runs on; messages may wait for a time slice
+        print(f"sage group {group}: Zenoh threads: {refused}; they run at the normal priority",
+              file=sys.stderr)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.nice:  # first, so every thread the process starts has it
@@ -230,6 +241,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"sage group {args.group}: {refused}; running at the normal priority", file=sys.stderr)
     try:
         ctx, specs = build_context(args)
+        raise_zenoh_threads(args.group, ctx.settings.processes.zenoh_realtime)
         event_loop.run(run_group(ctx, specs, args.export_port, args.parent_pipe), fast=True)
     except (SageError, json.JSONDecodeError) as exc:
         print(f"sage group {args.group}: {exc}", file=sys.stderr)

@@ -28,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--receiver-fifo", type=int, default=None, metavar="PRIORITY",
                    help="SCHED_FIFO priority of the paced /cmd_vel case's receiver, 0: normal "
                         "(default: the motion group's processes.realtime)")
+    p.add_argument("--zenoh-fifo", type=int, default=None, metavar="PRIORITY",
+                   help="SCHED_FIFO priority of both processes' Zenoh threads, 0: normal "
+                        "(default: processes.zenoh_realtime, as the robot's groups have them)")
     p.add_argument("--at-rest", action="store_true",
                    help="also the CPU of `sage sim` at rest, one process vs process groups (minutes)")
     p.add_argument("--rest-warm", type=float, default=50.0, help="--at-rest: warm-up per mode (s)")
@@ -91,7 +94,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             cases.append({"message": label, **result})
     out: dict[str, Any] = {"bench": "bus", "cases": cases}
     if not args.no_zenoh:
-        out["zenoh_cases"] = _zenoh_cases(args.zenoh_scale, _motion_fifo(args.receiver_fifo))
+        out["zenoh_cases"] = _zenoh_cases(
+            args.zenoh_scale, _motion_fifo(args.receiver_fifo), _zenoh_fifo(args.zenoh_fifo)
+        )
         # latency between processes is the machine's scheduling as much as the bus's: say how busy
         out["load_avg_1m"] = round(os.getloadavg()[0], 2)
     if args.at_rest:
@@ -110,7 +115,16 @@ def _motion_fifo(asked: int | None) -> int:
     return ProcessSettings().realtime.get("motion", 0)
 
 
-def _zenoh_cases(scale: float, motion_fifo: int = 0) -> list[dict[str, Any]] | str:
+def _zenoh_fifo(asked: int | None) -> int:
+    """Both processes' Zenoh threads' real-time priority: as asked, or the groups'."""
+    if asked is not None:
+        return asked
+    from sage_robot.core.config.processes import ProcessSettings
+
+    return ProcessSettings().zenoh_realtime
+
+
+def _zenoh_cases(scale: float, motion_fifo: int = 0, zenoh_fifo: int = 0) -> list[dict[str, Any]] | str:
     if scale <= 0:
         from sage_robot.core.errors import SageError
 
@@ -131,7 +145,7 @@ def _zenoh_cases(scale: float, motion_fifo: int = 0) -> list[dict[str, Any]] | s
     finally:
         transport.close()
     in_process = {"message": "small", "transport": "zenoh attached, in-process subscriber", **local}
-    return [in_process, *run_cases(default_cases(scale, motion_fifo))]
+    return [in_process, *run_cases(default_cases(scale, motion_fifo, zenoh_fifo))]
 
 
 class _Stamped:

@@ -15,7 +15,9 @@ The paced ``/cmd_vel`` case receives as the robot's motion process does: at the 
 the profile gives it (``processes.realtime``, :mod:`sage_robot.core.realtime`) where this
 process may take it, and say so (``receiver``); the publisher runs at the normal priority, as
 the navigator and the web server do. The other cases' receivers (navigation, the pages; a
-flood, which would hold a real-time receiver's core) run at the normal priority.
+flood, which would hold a real-time receiver's core) run at the normal priority. In both
+processes Zenoh's own threads run at ``processes.zenoh_realtime``, as in the robot's groups
+(``publisher`` says what the publisher's got).
 """
 
 from __future__ import annotations
@@ -49,22 +51,23 @@ class Case:
     messages: int
     rate_hz: float | None  # None: flood
     receiver_fifo: int = 0  # the receiving process's SCHED_FIFO priority (0: normal)
+    zenoh_fifo: int = 0  # both processes' Zenoh threads' SCHED_FIFO priority (0: normal)
 
 
-def default_cases(scale: float, motion_fifo: int = 0) -> list[Case]:
+def default_cases(scale: float, motion_fifo: int = 0, zenoh_fifo: int = 0) -> list[Case]:
     """The cases; paced ``/cmd_vel`` received at ``motion_fifo`` (the motion group's
-    ``processes.realtime``)."""
+    ``processes.realtime``); Zenoh's threads at ``zenoh_fifo`` (``processes.zenoh_realtime``)."""
 
     def n(count: int) -> int:
         return max(10, int(count * scale))
 
     return [
-        Case("/cmd_vel Twist", "cmd_vel", n(3000), 1000.0, motion_fifo),
-        Case("/cmd_vel Twist", "cmd_vel", n(20000), None),
-        Case(f"/scan LaserScan {SCAN_BEAMS} beams", "scan", n(500), 50.0),
-        Case(f"/scan LaserScan {SCAN_BEAMS} beams", "scan", n(5000), None),
-        Case(f"camera CompressedImage {FRAME_W}x{FRAME_H} JPEG", "camera", n(150), 30.0),
-        Case(f"camera CompressedImage {FRAME_W}x{FRAME_H} JPEG", "camera", n(1000), None),
+        Case("/cmd_vel Twist", "cmd_vel", n(3000), 1000.0, motion_fifo, zenoh_fifo),
+        Case("/cmd_vel Twist", "cmd_vel", n(20000), None, 0, zenoh_fifo),
+        Case(f"/scan LaserScan {SCAN_BEAMS} beams", "scan", n(500), 50.0, 0, zenoh_fifo),
+        Case(f"/scan LaserScan {SCAN_BEAMS} beams", "scan", n(5000), None, 0, zenoh_fifo),
+        Case(f"camera CompressedImage {FRAME_W}x{FRAME_H} JPEG", "camera", n(150), 30.0, 0, zenoh_fifo),
+        Case(f"camera CompressedImage {FRAME_W}x{FRAME_H} JPEG", "camera", n(1000), None, 0, zenoh_fifo),
     ]
 
 
@@ -131,6 +134,7 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
     if refused:
         receiver += f" ({refused})"
     transport = ZenohTransport(settings_for(robot, [f"tcp/127.0.0.1:{port}"], []))
+    zenoh_refused = _raise_zenoh_threads(case.zenoh_fifo)
     bus = Bus(WallClock(), transport)
     latencies: list[float] = []
     times: list[float] = []  # first and last arrival
@@ -150,7 +154,7 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
     bus.subscribe(TOPIC, type(_message_maker(case.kind)(0.0)), on_msg, maxsize=case.messages)
     child = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "sage_robot.bench.bus_zenoh", "--child",
-        robot, str(port), case.kind, str(case.messages), str(case.rate_hz or 0),
+        robot, str(port), case.kind, str(case.messages), str(case.rate_hz or 0), str(case.zenoh_fifo),
     )
     try:
         await _until_received_or_exited(done, child)
@@ -162,7 +166,26 @@ async def _receive(case: Case, robot: str) -> dict[str, Any]:
             await child.wait()
         transport.close()
         set_normal()
-    return {**_summary(case, latencies, times), "receiver": receiver, "publisher": "normal"}
+    publisher = _publisher(case.zenoh_fifo, zenoh_refused)
+    return {**_summary(case, latencies, times), "receiver": receiver, "publisher": publisher}
+
+
+def _raise_zenoh_threads(priority: int) -> str | None:
+    """This process's Zenoh threads at ``priority`` as a group's are; why not, if refused."""
+    from sage_robot.core.realtime import raise_threads
+    from sage_robot.core.transport.keys import ZENOH_THREADS
+
+    return raise_threads(priority, ZENOH_THREADS)[1] if priority else None
+
+
+def _publisher(zenoh_fifo: int, refused: str | None) -> str:
+    """The publisher as it ran: normal, its Zenoh threads at ``zenoh_fifo`` unless this
+    process (same machine, same limits) was refused that."""
+    if not zenoh_fifo:
+        return "normal"
+    if refused:
+        return f"normal (Zenoh threads: {refused})"
+    return f"normal, Zenoh threads SCHED_FIFO {zenoh_fifo}"
 
 
 async def _until_received_or_exited(done: asyncio.Event, child: Any) -> None:
@@ -209,12 +232,17 @@ def run_cases(cases: list[Case]) -> list[dict[str, Any]]:
 # ---------------------------------------------------------------- the publisher (the child)
 
 
-async def _publish(robot: str, port: int, kind: str, messages: int, rate_hz: float) -> None:
+async def _publish(
+    robot: str, port: int, kind: str, messages: int, rate_hz: float, zenoh_fifo: int = 0
+) -> None:
     from sage_robot.core.bus import Bus
     from sage_robot.core.clock import WallClock
     from sage_robot.core.transport.zenoh_bus import ZenohTransport
 
     transport = ZenohTransport(settings_for(robot, [], [f"tcp/127.0.0.1:{port}"]))
+    refused = _raise_zenoh_threads(zenoh_fifo)
+    if refused:
+        print(f"bench publisher: Zenoh threads: {refused}", file=sys.stderr)
     bus = Bus(WallClock(), transport)
     make = _message_maker(kind)
     try:
@@ -244,12 +272,14 @@ async def _send(bus: Any, make: Any, messages: int, rate_hz: float) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--child", nargs=5, metavar=("ROBOT", "PORT", "KIND", "N", "RATE"), required=True)
-    robot, port, kind, n, rate = p.parse_args(argv).child
+    p.add_argument(
+        "--child", nargs=6, metavar=("ROBOT", "PORT", "KIND", "N", "RATE", "ZENOH_FIFO"), required=True
+    )
+    robot, port, kind, n, rate, zenoh_fifo = p.parse_args(argv).child
     from sage_robot.core.realtime import set_normal
 
     set_normal()  # not the receiver's real-time priority, which a child inherits
-    asyncio.run(_publish(robot, int(port), kind, int(n), float(rate)))
+    asyncio.run(_publish(robot, int(port), kind, int(n), float(rate), int(zenoh_fifo)))
 
 
 if __name__ == "__main__":

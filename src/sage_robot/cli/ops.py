@@ -230,7 +230,8 @@ def run_install_service(args: argparse.Namespace) -> int:
     profile_arg = f"--profile {Path(args.profile).resolve()} " if args.profile else ""
     from sage_robot.core.config import load_profile
 
-    rtprio = max(load_profile(args.profile, {}).processes.realtime.values(), default=0)
+    procs = load_profile(args.profile, {}).processes
+    rtprio = max([*procs.realtime.values(), procs.zenoh_realtime])
     unit = SERVICE_TEMPLATE.format(
         mode=args.mode, user=args.user, workdir=Path.cwd(), sage=sage, profile_arg=profile_arg, rtprio=rtprio,
         processes=" --processes" if args.processes else "",

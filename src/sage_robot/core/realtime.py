@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 
 FIFO_MIN, FIFO_MAX = 1, 99  # Linux SCHED_FIFO priorities
 TASKS_DIR = "/proc/self/task"  # one entry per thread of this process
@@ -43,11 +44,48 @@ def set_fifo(priority: int) -> str | None:
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, param)
     except OSError as exc:
-        return f"SCHED_FIFO {priority} not permitted ({exc.strerror}; needs CAP_SYS_NICE or LimitRTPRIO)"
+        return _refusal(priority, exc)
     for tid in _threads():
         with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
             os.sched_setscheduler(tid, os.SCHED_FIFO, param)
     return None
+
+
+def raise_threads(priority: int, name: re.Pattern[str]) -> tuple[int, str | None]:
+    """The threads of this process whose name (``comm``) matches ``name`` at ``SCHED_FIFO``
+    ``priority``, leaving alone those already at that priority or higher (a real-time
+    process's). Returns how many were raised, and ``None`` or why not (nothing changed then).
+    Threads they start later inherit it."""
+    if not FIFO_MIN <= priority <= FIFO_MAX:
+        return 0, f"real-time priority {priority} is not in {FIFO_MIN}..{FIFO_MAX}"
+    if not hasattr(os, "SCHED_FIFO"):
+        return 0, "this system has no SCHED_FIFO"
+    raised = 0
+    for tid in _threads():
+        if not tid or not name.match(_thread_name(tid)):
+            continue
+        with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
+            fifo = os.sched_getscheduler(tid) == os.SCHED_FIFO
+            if fifo and os.sched_getparam(tid).sched_priority >= priority:
+                continue
+            try:
+                os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+            except PermissionError as exc:
+                return raised, _refusal(priority, exc)
+            raised += 1
+    return raised, None
+
+
+def _refusal(priority: int, exc: OSError) -> str:
+    return f"SCHED_FIFO {priority} not permitted ({exc.strerror}; needs CAP_SYS_NICE or LimitRTPRIO)"
+
+
+def _thread_name(tid: int) -> str:
+    try:
+        with open(f"{TASKS_DIR}/{tid}/comm") as f:
+            return f.read().strip()
+    except OSError:  # ended
+        return ""
 
 
 def set_normal() -> None:

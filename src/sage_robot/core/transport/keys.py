@@ -25,6 +25,7 @@ from sage_robot.core.errors import ConfigError, SageError
 TOPIC_NAME = re.compile(r"^(/[A-Za-z0-9_]+)+$")  # ROS names: no wildcards, no empty chunks
 PREFIX = "sage"
 RUNTIME_ENV = "ZENOH_RUNTIME"  # Zenoh reads its thread pools from here, once
+ZENOH_THREADS = re.compile(r"^(app|rx|tx|net|acc)-\d+$")  # the names of Zenoh's pool threads
 TX_QUEUE_KEY = "transport/link/tx/queue/size/data"  # batches a link queues at the data priority
 ANY_ADDRESS = re.compile(r"/(0\.0\.0\.0|\[::\]):")  # a listen address a tool cannot connect to
 
