@@ -54,6 +54,10 @@ def test_slam_on_a_drawn_building_with_a_bare_corridor(tmp_path: Path) -> None:
         assert result["clutter"] >= 1
         assert result["nav_planned"] is True
         assert result["nav_path_clear"] is True
+        # the best rigid fit can only lower the error; a scale fit on top lowers it further
+        aligned = (result["ate_scale_aligned_rmse_m"], result["ate_aligned_rmse_m"], result["ate_rmse_m"])
+        assert aligned == tuple(sorted(aligned)), result
+        assert 0.95 < result["travel_scale"] < 1.05
     mean = {key: sum(r[key] for r in results) / len(results) for key in MEAN_KEYS}
     _assert_within_bounds(mean)
 

@@ -14,8 +14,13 @@ maps it with :class:`sage_robot.nav.slam.engine.Slam`:
 
 Scores, against the true poses and the true map (with its clutter):
 
-- ``ate_rmse_m``: absolute trajectory error, RMSE of the position error of every scan (m),
-  in the map frame (the SLAM starts at the true first pose; no alignment);
+- ``ate_rmse_m``: RMSE of the position error of every scan (m), in the map frame (the SLAM
+  starts at the true first pose; no alignment);
+- ``ate_aligned_rmse_m``: the same after the rigid motion that fits the estimate best (the
+  absolute trajectory error as the TUM benchmark defines it), and ``travel_scale``: the
+  scale a similarity alignment takes on top (above 1: the estimate reads the travel short;
+  below 1: long), with ``ate_scale_aligned_rmse_m`` the error left after it
+  (:mod:`sage_robot.nav.slam.trajectory`);
 - ``return_error_m``: the position error at the end of the drive (back at the start for
   ``auto``: the map keeps its shape when the robot returns);
 - map agreement (:mod:`sage_robot.nav.slam.mapscore`): mean distance from the mapped walls
@@ -95,6 +100,7 @@ def run_check(
     from sage_robot.nav.slam.mapscore import score_map
     from sage_robot.nav.slam.points import Scan
     from sage_robot.nav.slam.store import build_map
+    from sage_robot.nav.slam.trajectory import align
 
     path = Path(map_path) if map_path is not None else shipped_map()
     if not path.is_file():
@@ -121,6 +127,7 @@ def run_check(
     true_xy = np.asarray(truth)[:, :2]
     err = np.hypot(*(est[:, :2] - true_xy).T)
     moved = np.hypot(*np.diff(true_xy, axis=0).T)
+    rigid, similar = align(est[:, :2], true_xy), align(est[:, :2], true_xy, with_scale=True)
     mapped = build_map(slam)
     score = score_map(world.grid, mapped, world.seen >= MIN_SEEN_HITS)
     far = truth[int(np.argmax(np.hypot(*(true_xy - true_xy[0]).T)))]
@@ -136,6 +143,9 @@ def run_check(
         "loop_closures": slam.loop_closures,
         "cpu_s": round(cpu_s, 2),
         "ate_rmse_m": round(float(np.sqrt((err**2).mean())), 4),
+        "ate_aligned_rmse_m": round(rigid.rmse_m, 4),
+        "ate_scale_aligned_rmse_m": round(similar.rmse_m, 4),
+        "travel_scale": round(similar.scale, 5),
         "trajectory_error_mean_m": round(float(err.mean()), 4),
         "trajectory_error_max_m": round(float(err.max()), 4),
         "return_error_m": round(float(err[-1]), 4),
