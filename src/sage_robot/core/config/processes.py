@@ -52,7 +52,7 @@ MAX_REALTIME = 99
 # message a normal-priority node publishes (the navigator's or the web's /cmd_vel) is written
 # to the socket by one of these threads: under the normal scheduler, beside the busy robot on
 # two cores, it waited for a time slice (1 kHz /cmd_vel p99 0.9-1.9 ms, 3.7-5.1 ms with both
-# cores busy); raised, it goes at once (0.6-0.8 ms; 1.5-2.4 ms). Their work per message is
+# cores busy); raised, it goes at once (0.6-0.9 ms; 1.3-2.7 ms). Their work per message is
 # short (a copy to a socket, a frame decoded and queued for the node's loop). 10 stays below
 # the motion process's 40, whose own Zenoh threads keep its priority.
 DEFAULT_ZENOH_REALTIME = 10
