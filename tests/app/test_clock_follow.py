@@ -127,3 +127,27 @@ def test_a_followers_timers_of_one_period_tick_together_whenever_they_started() 
         assert SimClock(3.013).phase(0.08) == 3.013  # a lockstep clock keeps its phase (determinism)
 
     asyncio.run(body())
+
+
+def test_a_timeout_that_was_not_needed_takes_its_alarm_with_it() -> None:
+    """A wait with a timeout that ends early (the serial bridge's watch at rest, woken by a
+    command or a read) leaves no alarm behind: the process does not wake for it later."""
+
+    async def body() -> None:
+        clock = FollowerClock()
+        clock.follow(1.0, speed=1.0)
+        woken = asyncio.Event()
+        asyncio.get_running_loop().call_soon(woken.set)
+        await clock.wait_for(woken.wait(), 0.05)
+        await asyncio.sleep(0)  # the timeout's sleeper takes its cancellation
+        assert clock._alarm is None  # nobody sleeps: no wake-up is scheduled
+        clock.every(0.1, lambda: None, "other")  # with another sleeper, the alarm is for it
+        await asyncio.sleep(0)
+        other_due = clock._alarm_at
+        woken.clear()
+        asyncio.get_running_loop().call_soon(woken.set)
+        await clock.wait_for(woken.wait(), 0.05)
+        await asyncio.sleep(0)
+        assert clock._alarm_at == pytest.approx(other_due)
+
+    asyncio.run(body())

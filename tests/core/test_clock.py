@@ -144,3 +144,48 @@ async def test_the_wall_clock_offloads_to_a_thread():
 
     main = threading.get_ident()
     assert await WallClock().offload(threading.get_ident) != main
+
+
+@pytest.mark.parametrize("steps_per_wake", [1, 2, 3])
+async def test_a_paced_run_wakes_once_per_steps_per_wake_and_never_runs_ahead(
+    monkeypatch: pytest.MonkeyPatch, steps_per_wake: int
+) -> None:
+    """The simulator's process (process groups) takes two 10 ms steps per wake-up. The last
+    step of a batch ends one step ahead of the wall time, as a single step does; none runs
+    further ahead, and none later than steps_per_wake - 2 steps."""
+    from types import SimpleNamespace
+
+    import sage_robot.core.clock as clock_module
+
+    wall = [100.0]  # a wall clock that moves only while the run sleeps
+    waits: list[float] = []
+    real_sleep = asyncio.sleep
+
+    async def sleep(delay: float, result: object = None) -> object:
+        if delay > 0:
+            waits.append(delay)
+            wall[0] += delay
+        return await real_sleep(0, result)
+
+    monkeypatch.setattr(clock_module, "time", SimpleNamespace(monotonic=lambda: wall[0]))
+    monkeypatch.setattr(asyncio, "sleep", sleep)
+    clock = SimClock(steps_per_wake=steps_per_wake)
+    step_s, steps = 0.01, 24
+    leads: list[float] = []
+    clock_ran: list[float] = []
+
+    def physics(dt: float) -> None:
+        leads.append(clock.now() + dt - (wall[0] - 100.0))  # how far the step's end is ahead of the wall
+        clock_ran.append(clock.now())
+
+    await clock.run(step_s, speed=1.0, until=steps * step_s, on_step=physics)
+    assert len(clock_ran) == steps
+    assert clock_ran == pytest.approx([k * step_s for k in range(steps)])  # every 10 ms step taken
+    assert len(waits) == pytest.approx(steps / steps_per_wake, abs=1)
+    assert max(leads) <= step_s + 1e-9
+    assert min(leads) >= -(steps_per_wake - 2) * step_s - 1e-9
+
+
+def test_steps_per_wake_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="steps_per_wake"):
+        SimClock(steps_per_wake=0)

@@ -143,6 +143,7 @@ class PtyMcu:
         self.slave_name = ""
         self.bytes_dropped = 0  # bytes the firmware sent while nobody read them
         self.writes = 0  # os.write calls toward the Jetson
+        self.bytes_written = 0  # ... and the bytes they wrote
         self.lockstep_timeouts = 0  # lockstep waits that ran out (each held the simulator LOCKSTEP_WAIT_S)
         self._pending = bytearray()  # frames produced, written with the next ODOM
         self._open()
@@ -202,6 +203,7 @@ class PtyMcu:
             if self.lockstep and written and not self._wait_readable(before + written):
                 self.lockstep_timeouts += 1
             self.bytes_dropped += len(out) - written
+            self.bytes_written += written
             self.writes += 1
 
     def _readable(self, fd: int | None = None) -> int:

@@ -92,6 +92,10 @@ TX_COUNT_RESOURCE = ResourceKey("mcu_tx_bytes", TxCount)
 PORT_READ_ELSEWHERE = ResourceKey("mcu_port_read_elsewhere", bool)
 CMD_TIMEOUT_CHECK_S = 0.01  # while commanded or moving: how often the command age is checked (clock s)
 IDLE_CHECK_S = 0.05  # at rest: how often the link and the firmware are looked at (clock s)
+# At rest in followed simulated time, the watch's turn rides on a read of the port once this
+# long has passed since the last (clock s): the firmware's bytes come every 20 ms, so its own
+# IDLE_CHECK_S timer only fires when they stop, and the process wakes 20 times a second less.
+IDLE_TURN_ON_READ_S = 0.03
 TIMEOUT_LOG_EVERY_S = 10.0  # a command timeout is logged at most this often (clock s)
 STATUS_PERIOD_S = 1.0  # /mcu/status and the frame-rate window (clock s)
 SIM_RX_POLL_S = 0.005  # on a simulated clock the port is read in the loop this often (clock s)
@@ -142,6 +146,8 @@ class SerialBridgeNode(Node):
         self.bus.declare(topics.IMU, Imu)
         self.bus.declare(topics.MCU_STATUS, DiagnosticStatus)
         self._wake = asyncio.Event()  # a command for the watch that looks less often at rest
+        self._watch_idle = False  # the watch waits for _wake (at rest)
+        self._turn_at = self.clock.now()  # the watch's last turn
         self.subscribe(topics.CMD_VEL, Twist, self._on_cmd_vel)
         self.every(STATUS_PERIOD_S, self._publish_status, "serial_bridge.status")
         self._beat_fd = heartbeat_fd()
@@ -176,7 +182,7 @@ class SerialBridgeNode(Node):
         standing command at ``mcu.resend_hz``, the firmware, the supervisor's heartbeat."""
         beat_at = self.clock.now()
         while True:
-            now = self.clock.now()
+            now = self._turn_at = self.clock.now()
             try:
                 self._watch_turn(now)
             except Exception as exc:  # the watch stops stale commands: no bug in a job may end it
@@ -190,8 +196,12 @@ class SerialBridgeNode(Node):
                 await self.clock.sleep(CMD_TIMEOUT_CHECK_S)
                 continue
             self._wake.clear()
-            with contextlib.suppress(asyncio.TimeoutError):
-                await self.clock.wait_for(self._wake.wait(), IDLE_CHECK_S)
+            self._watch_idle = True
+            try:
+                with contextlib.suppress(asyncio.TimeoutError):
+                    await self.clock.wait_for(self._wake.wait(), IDLE_CHECK_S)
+            finally:
+                self._watch_idle = False
 
     def _watch_turn(self, now: float) -> None:
         self._link_step()
@@ -389,6 +399,8 @@ class SerialBridgeNode(Node):
             return
         if data:
             self._on_bytes(data)
+        if self._watch_idle and self.clock.now() - self._turn_at >= IDLE_TURN_ON_READ_S - TIME_EPS_S:
+            self._wake.set()  # the watch's turn now: the process is awake anyway
 
     def _stop_reader(self) -> None:
         if self._reader_fd is not None:
