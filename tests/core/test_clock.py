@@ -146,9 +146,9 @@ async def test_the_wall_clock_offloads_to_a_thread():
     assert await WallClock().offload(threading.get_ident) != main
 
 
-@pytest.mark.parametrize("steps_per_wake", [1, 2, 3])
+@pytest.mark.parametrize(("steps_per_wake", "idle"), [(1, False), (2, False), (3, False), (2, True)])
 async def test_a_paced_run_wakes_once_per_steps_per_wake_and_never_runs_ahead(
-    monkeypatch: pytest.MonkeyPatch, steps_per_wake: int
+    monkeypatch: pytest.MonkeyPatch, steps_per_wake: int, idle: bool
 ) -> None:
     """The simulator's process (process groups) takes two 10 ms steps per wake-up. The last
     step of a batch ends one step ahead of the wall time, as a single step does; none runs
@@ -169,7 +169,9 @@ async def test_a_paced_run_wakes_once_per_steps_per_wake_and_never_runs_ahead(
 
     monkeypatch.setattr(clock_module, "time", SimpleNamespace(monotonic=lambda: wall[0]))
     monkeypatch.setattr(asyncio, "sleep", sleep)
-    clock = SimClock(steps_per_wake=steps_per_wake)
+    clock = SimClock(steps_per_wake=steps_per_wake, idle_steps_per_wake=4)
+    clock.idle = idle  # the simulated hardware says nothing moves: 4 steps per wake-up
+    per_wake = 4 if idle else steps_per_wake
     step_s, steps = 0.01, 24
     leads: list[float] = []
     clock_ran: list[float] = []
@@ -181,11 +183,13 @@ async def test_a_paced_run_wakes_once_per_steps_per_wake_and_never_runs_ahead(
     await clock.run(step_s, speed=1.0, until=steps * step_s, on_step=physics)
     assert len(clock_ran) == steps
     assert clock_ran == pytest.approx([k * step_s for k in range(steps)])  # every 10 ms step taken
-    assert len(waits) == pytest.approx(steps / steps_per_wake, abs=1)
+    assert len(waits) == pytest.approx(steps / per_wake, abs=1)
     assert max(leads) <= step_s + 1e-9
-    assert min(leads) >= -(steps_per_wake - 2) * step_s - 1e-9
+    assert min(leads) >= -(per_wake - 2) * step_s - 1e-9
 
 
 def test_steps_per_wake_must_be_positive() -> None:
     with pytest.raises(ValueError, match="steps_per_wake"):
         SimClock(steps_per_wake=0)
+    with pytest.raises(ValueError, match="idle_steps_per_wake"):
+        SimClock(idle_steps_per_wake=0)

@@ -13,7 +13,7 @@ import pytest
 from sage_robot.app.launcher import NodeSpec
 from sage_robot.app.profiles import PROFILES
 from sage_robot.app.registry import node_class
-from sage_robot.app.runtime import make_context, run_launcher
+from sage_robot.app.runtime import SIM_STEP_S, make_context, run_launcher
 from sage_robot.core import topics
 from sage_robot.core.config import load_profile
 from sage_robot.core.msgs import Event, Level
@@ -106,6 +106,20 @@ async def test_a_standing_command_is_resent_at_resend_hz_and_never_trips(rig: Ri
     assert rig.firmware.rx.frames - received0 >= 2.0 * 10  # >= 10 Hz
     assert rig.firmware.watchdog_trips == 0
     assert rig.firmware.wheel_speeds[0] == pytest.approx(0.3, abs=0.02)
+
+
+async def test_the_simulated_mcu_marks_its_clock_idle_only_at_rest(rig: Rig):
+    """The simulator's process wakes less while nothing is commanded and nothing moves
+    (process groups: the clock's idle_steps_per_wake); a command ends that at once."""
+    await rig.run(0.1)
+    assert rig.clock.idle
+    rig.command(0.3)
+    await rig.run(0.05)
+    assert not rig.clock.idle
+    rig.command(0.0)
+    await rig.until(lambda: rig.firmware.stopped, 3.0)
+    await rig.run(SIM_STEP_S)
+    assert rig.clock.idle
 
 
 async def test_command_timeout_stops_a_stale_command():

@@ -62,6 +62,10 @@ CLOCK_MODES = ("source", "follow", "wall")
 # wake-up of a Python process costs ~0.2-0.4 ms of CPU at rest. Only the bytes' timing within
 # those 20 ms changes: the firmware writes ODOM + IMU once per ODOM period anyway.
 SOURCE_STEPS_PER_WAKE = 2
+# ... and once per 40 ms while the simulated MCU is idle (no command, wheels still): the
+# firmware's frames then come two at a time every 40 ms and a first command from rest waits
+# up to 40 ms (instead of 10) for the firmware model to take it. Once it is moving, 20 ms.
+SOURCE_IDLE_STEPS_PER_WAKE = 4
 STDIN_FD = 0  # --parent-pipe: the supervisor holds the other end of stdin
 STDIN_READ_BYTES = 4096  # nothing is ever written there: one read sees the end
 
@@ -95,7 +99,9 @@ def group_specs(mode: str, nodes: list[str]) -> list[NodeSpec]:
 
 def make_clock(mode: str, start: float, board: str = "") -> Clock:
     if mode == "source":
-        return SimClock(start, steps_per_wake=SOURCE_STEPS_PER_WAKE)
+        return SimClock(
+            start, steps_per_wake=SOURCE_STEPS_PER_WAKE, idle_steps_per_wake=SOURCE_IDLE_STEPS_PER_WAKE
+        )
     if mode == "follow":
         return FollowerClock(start, ClockBoard(board) if board else None)
     return WallClock()

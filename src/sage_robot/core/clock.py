@@ -131,14 +131,21 @@ class SimClock(Clock):
     is_simulated = True
     is_lockstep = True
 
-    def __init__(self, start: float = 0.0, steps_per_wake: int = 1) -> None:
-        if steps_per_wake < 1:
-            raise ValueError(f"steps_per_wake must be at least 1, not {steps_per_wake}")
+    def __init__(
+        self, start: float = 0.0, steps_per_wake: int = 1, idle_steps_per_wake: int | None = None
+    ) -> None:
+        idle_steps = steps_per_wake if idle_steps_per_wake is None else idle_steps_per_wake
+        for name, n in (("steps_per_wake", steps_per_wake), ("idle_steps_per_wake", idle_steps)):
+            if n < 1:
+                raise ValueError(f"{name} must be at least 1, not {n}")
         self._now = start
         # A paced run() takes this many steps per wake-up of the process: the last of them
         # ends one step ahead of the wall time, as a single step does; the earlier ones are
-        # taken up to steps_per_wake - 2 steps after their own.
+        # taken up to steps_per_wake - 2 steps after their own. While ``idle`` (set by the
+        # simulated hardware: nothing commanded, nothing moving) it takes idle_steps_per_wake.
         self.steps_per_wake = steps_per_wake
+        self.idle_steps_per_wake = idle_steps
+        self.idle = False
         self._waiters: list[tuple[float, int, asyncio.Future[None]]] = []
         self._seq = itertools.count()
         # offloaded jobs not yet handed over -> (when they are due, the thread's future); a
@@ -313,7 +320,8 @@ class SimClock(Clock):
         simulator's physics step. A paced simulation that falls behind (a busy machine)
         runs slower than asked and never races to catch up: work done in threads (planning,
         localization) takes wall time, and a burst of simulated time would leave it behind.
-        A paced run wakes once per ``steps_per_wake`` steps (the clock's; 1 by default).
+        A paced run wakes once per ``steps_per_wake`` steps (the clock's; 1 by default), or
+        per ``idle_steps_per_wake`` while the clock is marked ``idle``.
         """
         self._driven = True
         try:
@@ -347,7 +355,8 @@ class SimClock(Clock):
                 wall = time.monotonic()
                 ahead = (self._now - pace_sim) / speed - (wall - pace_wall)
                 if ahead > TIME_EPS_S:  # the next wake-up: when the first step of the next batch is due
-                    await asyncio.sleep(ahead + (self.steps_per_wake - 1) * step_s / speed)
+                    batch = self.idle_steps_per_wake if self.idle else self.steps_per_wake
+                    await asyncio.sleep(ahead + (batch - 1) * step_s / speed)
                 elif -ahead > LAG_REBASE_S:
                     pace_wall, pace_sim = wall, self._now
                     if (wall - wall0) - (self._now - sim0) / speed > LAG_WARN_S:

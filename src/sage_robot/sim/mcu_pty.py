@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from sage_robot.core.clock import SimClock
 from sage_robot.core.node import SIM_STEP_HOOKS, Node
 from sage_robot.core.resources import ResourceKey
 from sage_robot.hardware.mcu.bridge import PORT_READ_ELSEWHERE, PORT_RESOURCE, TX_COUNT_RESOURCE, TxCount
@@ -297,10 +298,13 @@ class McuSimNode(Node):
     def physics_step(self, dt: float) -> None:
         """One simulator step of ``dt`` s ending at clock time now + dt."""
         t = self.clock.now() + dt
-        wheels = self.firmware.control_step(dt, t)
+        fw = self.firmware
+        wheels = fw.control_step(dt, t)
         v, w = self.body.step(dt, wheels)
-        self.firmware.sense(dt, v, w)
+        fw.sense(dt, v, w)
         self.pty.pump(t)
+        if isinstance(self.clock, SimClock):  # nothing commanded, nothing moving: it may wake less
+            self.clock.idle = fw.stopped and fw.last_command == (0.0, 0.0)
 
     async def teardown(self) -> None:
         if self.physics_step in getattr(self, "_hooks", []):
