@@ -129,3 +129,46 @@ def test_odometry_is_interpolated_at_the_scan_time() -> None:
     assert abs(th) == pytest.approx(math.pi, abs=1e-9)  # halfway across the ±pi seam
     assert odom_at(history, 0.5) == history[0][1]
     assert odom_at(history, 2.0) == history[-1][1]
+
+
+async def test_node_turns_the_odometry_with_the_gyro() -> None:
+    """With ``/imu/data`` the odometry's turns are the gyro's: scans that see nothing (the pose
+    is dead-reckoned) follow the gyro's heading, not the wheels' 20 % too large turn; when the
+    gyro falls silent the node goes on with the wheels' turns."""
+    from sage_robot.core.msgs import Imu, LaserScan, Odometry, Pose2D, Twist
+
+    settings = load_profile(None, {"robot": {"lidar": {"x_m": 0.0, "y_m": 0.0, "yaw_rad": 0.0}}})
+    clock = SimClock()
+    bus = Bus(clock)
+    node = SlamNode(NodeContext(bus, clock, settings))
+    await node.setup()
+    progress = bus.subscribe(SLAM_PROGRESS, SlamProgress, maxsize=100)
+    rate, wheels_scale, scan_s, imu_s = 0.5, 1.2, 0.2, 0.01
+    nothing = np.full(360, np.inf, dtype=np.float32)
+    heading = 0.0  # the wheels'
+
+    async def scan_step(with_gyro: bool) -> SlamProgress:
+        nonlocal heading
+        for _ in range(round(scan_s / imu_s)):
+            await clock.step(imu_s)
+            heading += rate * wheels_scale * imu_s
+            if with_gyro:
+                bus.publish(topics.IMU, Imu(clock.now(), (0.0, 0.0, rate), (0.0, 0.0, 9.81)))
+        bus.publish(topics.ODOM, Odometry(clock.now(), Pose2D(0.0, 0.0, heading), Twist()))
+        await asyncio.sleep(0)
+        bus.publish(topics.SCAN, LaserScan(clock.now(), "laser", -math.pi, math.pi / 180, 0.1, 12.0, nothing))
+        return await asyncio.wait_for(progress.get(), WAIT_S)
+
+    try:
+        for _ in range(6):
+            last = await scan_step(True)
+        assert node.gyro_scans == 5  # every step after the first scan
+        assert last.pose.theta == pytest.approx(5 * rate * scan_s, abs=1e-6)
+        for _ in range(3):
+            last = await scan_step(False)
+        assert node.gyro_scans == 5
+        turned = 5 * rate * scan_s + 3 * rate * wheels_scale * scan_s
+        assert last.pose.theta == pytest.approx(turned, abs=1e-6)
+    finally:
+        await node.teardown()
+        await node._close()

@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from sage_robot.app.runtime import make_context, run_launcher, specs_for
 from sage_robot.core import topics
@@ -28,10 +29,19 @@ NODES = {"sim_world", "mcu_sim", "serial_bridge", "slam"}
 DOCK = (47.3, 57.5, 0.0)  # DOCKING_STATION in the shipped waypoints: the scenario's start
 
 
-async def test_teleop_drive_in_slam_mode(tmp_path: Path) -> None:
+IMU_CALIBRATION_S = 0.3  # the scenario drives off at 0.5 s: the bridge calibrates before
+
+
+@pytest.mark.parametrize("imu", [False, True], ids=["wheels", "gyro"])
+async def test_teleop_drive_in_slam_mode(tmp_path: Path, imu: bool) -> None:
+    """With ``imu`` (``sage slam --imu``) the firmware's gyro frames reach the slam node
+    through the bridge, and the odometry turns with them."""
     path = next(p for p in bundled_scenarios() if Path(p).stem == "teleop_drive")
     scenario = load_scenario(path)
     overrides = scenario.settings_overrides()
+    if imu:
+        imu_on = {"imu_enabled": True, "imu_calibration_s": IMU_CALIBRATION_S}
+        overrides["mcu"] = {**overrides.get("mcu", {}), **imu_on}
     # 4x real time: "as fast as possible" lets the simulator outrun the SLAM thread on a quiet
     # machine (it then maps only the newest scans: a dozen), which made this test depend on load.
     overrides.setdefault("sim", {})["speed"] = 4.0
@@ -49,6 +59,11 @@ async def test_teleop_drive_in_slam_mode(tmp_path: Path) -> None:
     )
     launcher = await run_launcher(ctx, specs, until=scenario.duration_s)
     assert not [n for n, h in launcher.health.items() if h.restarts], launcher.health
+    stats = launcher.nodes["slam"].stats()
+    if imu:  # every scan but those before the calibration ended
+        assert stats["gyro_scans"] >= stats["scans"] - 5, stats
+    else:
+        assert stats["gyro_scans"] == 0, stats
     world = ctx.resources[WORLD_RESOURCE]
     truth_end = world.pose
     assert math.dist(truth_end[:2], DOCK[:2]) > 8.0  # it drove out and down the corridor

@@ -62,6 +62,16 @@ def test_slam_on_a_drawn_building_with_a_bare_corridor(tmp_path: Path) -> None:
     _assert_within_bounds(mean)
 
 
+def test_slam_with_the_gyro_on_a_drawn_building(tmp_path: Path) -> None:
+    """``sage bench slam --sim --imu``: the odometry turns with the robot's gyro (its scale
+    error, residual bias and noise); the same bounds, on the mean of the same four seeds."""
+    path = _two_rooms_and_a_corridor(tmp_path)
+    results = [run_check(map_path=path, seed=seed, gyro=True) for seed in SEEDS]
+    assert all(r["gyro"] is True for r in results)
+    mean = {key: sum(r[key] for r in results) / len(results) for key in MEAN_KEYS}
+    _assert_within_bounds(mean)
+
+
 def test_slam_on_the_turtlebot_sandbox_map(shared_data: Callable[[str], Path]) -> None:
     result = run_check(map_path=shared_data("maps/tb3-sandbox/tb3_sandbox.yaml"))
     _assert_within_bounds(result)

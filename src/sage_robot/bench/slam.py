@@ -30,6 +30,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         choices=("corridor", "auto"),
         help="with --sim: corridor (shipped building only) or auto (a planned tour; default with --map)",
     )
+    p.add_argument(
+        "--imu",
+        action="store_true",
+        help="with --sim: the odometry turns with the robot's gyro (as `sage up --mode slam --imu`)",
+    )
     p.add_argument("--relations", help="Kümmerle relations file for the log")
     p.add_argument("--limit", type=int, help="only the first N scans")
     p.add_argument(
@@ -62,7 +67,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.sim:
         from sage_robot.bench.slam_sim import run_check
 
-        return {"bench": "slam_sim", **run_check(args.sim_length, args.seed, args.map, args.route)}
+        return {
+            "bench": "slam_sim",
+            **run_check(args.sim_length, args.seed, args.map, args.route, gyro=args.imu),
+        }
     if not args.log:
         raise ConfigError("give --log LOG (with --relations REL or --self-reference), or --sim")
     if not args.relations and not args.self_reference:

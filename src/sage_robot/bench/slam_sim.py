@@ -91,12 +91,15 @@ def run_check(
     route: str | None = None,
     people: bool = True,
     clutter: bool = True,
+    gyro: bool = False,
 ) -> dict[str, Any]:
-    """Drive, map and score; ``route`` defaults to ``corridor`` on the shipped map, else ``auto``."""
+    """Drive, map and score; ``route`` defaults to ``corridor`` on the shipped map, else ``auto``;
+    ``gyro``: the odometry turns with the robot's gyro (``sage bench slam --sim --imu``)."""
     from sage_robot.bench.slam_world import SCAN_PERIOD_S, SimDrive
     from sage_robot.core.errors import ConfigError
     from sage_robot.core.mapio import read_map
     from sage_robot.nav.slam.engine import Slam
+    from sage_robot.nav.slam.gyro import GyroOdometry
     from sage_robot.nav.slam.mapscore import score_map
     from sage_robot.nav.slam.points import Scan
     from sage_robot.nav.slam.store import build_map
@@ -112,16 +115,18 @@ def run_check(
         )
     truth_grid = read_map(path)
     truth = plan_drive(truth_grid, route, max_length_m)
-    world = SimDrive(truth_grid, truth, seed, people=people, clutter=clutter)
+    world = SimDrive(truth_grid, truth, seed, people=people, clutter=clutter, gyro=gyro)
     sp = world.spec
     angles = sp.angles()
     slam = Slam(slam_config(sp), initial_pose=truth[0])
+    fuse = GyroOdometry()
     t0 = time.process_time()
     for k in range(len(truth)):
-        odom = world.odometry(k)
+        wheels = world.odometry(k)
+        odom, turned = fuse.step(wheels, (0, world.gyro_yaw) if gyro else None)
         ranges = world.ranges(k)
         scan = Scan(ranges, angles, sp.range_min_m, sp.range_max_m, world.laser)
-        slam.add_scan(k * SCAN_PERIOD_S, odom, scan)
+        slam.add_scan(k * SCAN_PERIOD_S, odom, scan, gyro=turned)
     cpu_s = time.process_time() - t0
     _, est = slam.trajectory_array()
     true_xy = np.asarray(truth)[:, :2]
@@ -134,6 +139,7 @@ def run_check(
     return {
         "map": str(path),
         "route": route,
+        "gyro": gyro,
         "scans": len(truth),
         "distance_m": round(float(moved.sum()), 1),
         "duration_s": round(len(truth) * SCAN_PERIOD_S, 1),

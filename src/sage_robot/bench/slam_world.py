@@ -11,6 +11,10 @@ and drifting wheel odometry, stepped scan by scan along a list of true poses.
 - *Odometry*: wheel odometry with a systematic scale error (``ODOM_SCALE_ERROR``), a turn
   scale error (``TURN_SCALE_ERROR``), a heading drift per metre (``YAW_DRIFT_RAD_PER_M``) and
   random noise growing with the square root of the distance.
+- *Gyro* (``gyro=True``, the robot's BNO08x after the serial bridge's start-up calibration):
+  the turn with a scale error (``GYRO_SCALE_ERROR``), a residual bias drawn once
+  (``GYRO_BIAS_RADPS``) and an angle random walk (``GYRO_NOISE_RAD_PER_SQRT_S``), integrated
+  scan by scan (:attr:`SimDrive.gyro_yaw`).
 
 The map's unknown cells are solid in this world (some source maps draw most walls as the
 edge of the known floor). ``seen`` counts, per cell of the true grid, the lidar returns that
@@ -44,6 +48,10 @@ TURN_SCALE_ERROR = 0.02  # ...and turns 2 % too much (track width)
 YAW_DRIFT_RAD_PER_M = 0.01  # heading creeps this much per metre driven
 ODOM_NOISE_M_PER_SQRT_M = 0.01  # random translation noise (1 sigma) after 1 m
 YAW_NOISE_RAD_PER_SQRT_M = 0.003  # random heading noise (1 sigma) after 1 m (or 1 rad turned)
+# The robot's gyro (BNO08x, 100 Hz) after the bridge's start-up bias calibration:
+GYRO_BIAS_RADPS = 0.0005  # residual bias (1 sigma, drawn once): 1.7 deg a minute
+GYRO_SCALE_ERROR = 0.01  # turns read 1 % long
+GYRO_NOISE_RAD_PER_SQRT_S = 0.0002  # angle random walk (0.002 rad/s white noise at 100 Hz)
 SEEN_HIT_OFFSET_M = 0.01  # a true return is counted in the cell just behind its end point
 PLACE_TRIES = 400
 
@@ -105,14 +113,22 @@ class SimDrive:
     """Steps the world along true robot poses: scans, odometry and what the lidar saw."""
 
     def __init__(
-        self, grid: Any, truth: list[Pose], seed: int, people: bool = True, clutter: bool = True
+        self,
+        grid: Any,
+        truth: list[Pose],
+        seed: int,
+        people: bool = True,
+        clutter: bool = True,
+        gyro: bool = False,
     ) -> None:
         from sage_robot.sim.lidar import Lidar, LidarSpec
         from sage_robot.sim.people import Crowd
         from sage_robot.sim.raycast import GridRaycaster
 
-        rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)]
+        rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(5)]
         self.rng_odom = rngs[0]
+        self.rng_gyro = rngs[4] if gyro else None
+        self.gyro_bias = float(rngs[4].normal(0.0, GYRO_BIAS_RADPS)) if gyro else 0.0
         self.truth = truth
         self.clutter = 0
         # Unknown space is solid: a SLAM-made source map (Willow Garage) marks most of its walls
@@ -130,6 +146,7 @@ class SimDrive:
         self.crowd.is_free = self.caster.is_free
         self.seen = np.zeros(grid.data.shape, dtype=np.int32)
         self.odom: Pose = truth[0]
+        self.gyro_yaw = 0.0  # the gyro's integrated heading (rad, from the first scan)
         self._no_boxes = np.zeros((0, 6))
 
     @property
@@ -137,7 +154,8 @@ class SimDrive:
         return (self.spec.mount_x_m, self.spec.mount_y_m, self.spec.mount_yaw_rad)
 
     def odometry(self, k: int) -> Pose:
-        """The odometry pose at scan ``k`` (call in order)."""
+        """The wheel odometry pose at scan ``k`` (call in order); with ``gyro`` it also
+        advances :attr:`gyro_yaw`."""
         if k:
             dx, dy, dth = relative(self.truth[k - 1], self.truth[k])
             dist = math.hypot(dx, dy)
@@ -150,6 +168,9 @@ class SimDrive:
                 dth * (1 + TURN_SCALE_ERROR) + YAW_DRIFT_RAD_PER_M * dist + rng.normal(0, sth),
             )
             self.odom = compose(self.odom, step)
+            if self.rng_gyro is not None:
+                noise = self.rng_gyro.normal(0, GYRO_NOISE_RAD_PER_SQRT_S * math.sqrt(SCAN_PERIOD_S))
+                self.gyro_yaw += dth * (1 + GYRO_SCALE_ERROR) + self.gyro_bias * SCAN_PERIOD_S + noise
         return self.odom
 
     def ranges(self, k: int) -> np.ndarray:

@@ -1,6 +1,6 @@
 """`sage slam`: build a map.
 
-- ``sage slam [--out DIR] [--name NAME]``: the simulator in SLAM mode (profile "sim_slam":
+- ``sage slam [--out DIR] [--name NAME] [--imu]``: the simulator in SLAM mode (profile "sim_slam":
   world, firmware model, serial bridge, web, Foxglove, heartbeat, battery watchdog, ``slam``).
   Drive the robot from the web page; the map grows on ``/map``. The session is saved to
   ``DIR/NAME.{yaml,pgm,graph.npz,trajectory.txt}`` when it stops (Ctrl-C or ``--duration``);
@@ -17,7 +17,8 @@
   generated password, and the node writes into its own output directory.
 - ``sage slam save NAME --from OLD.graph.npz [--resolution R] [--out DIR]``: write a saved
   session again under another name (map re-rendered from the pose graph).
-- On the real robot: ``sage up --mode slam`` (the "slam" profile includes the node).
+- On the real robot: ``sage up --mode slam`` (the "slam" profile includes the node); with
+  ``--imu`` (both commands) the bridge publishes the gyro and the odometry turns with it.
 """
 
 from __future__ import annotations
@@ -43,6 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--speed", type=float, help="simulator real-time factor")
     p.add_argument("--duration", type=float, help="stop (and save) after this many simulated seconds")
     p.add_argument("--headless", action="store_true", help="no web server")
+    p.add_argument(
+        "--imu",
+        action="store_true",
+        help="publish /imu/data: the odometry turns with the gyro (docs/slam.md)",
+    )
     p.set_defaults(func=run_mapping, help_parser=p)
     ssub = p.add_subparsers(dest="slam_command", metavar="SUBCOMMAND")
     r = ssub.add_parser("replay", help="run SLAM over a CARMEN log and write map + trajectory")
@@ -76,8 +82,10 @@ def run_mapping(args: argparse.Namespace) -> int:
     check_name(args.name)
     if args.duration is not None and args.duration <= 0:
         raise ConfigError(f"--duration must be > 0 s, got {args.duration}")
-    overrides = {"sim": {"speed": args.speed}} if args.speed else None
-    settings = load_profile(args.profile, overrides)
+    overrides: dict[str, Any] = {"sim": {"speed": args.speed}} if args.speed else {}
+    if args.imu:
+        overrides["mcu"] = {"imu_enabled": True}
+    settings = load_profile(args.profile, overrides or None)
     ctx = mapping_context(settings, args.out, args.name)
     specs = [s for s in specs_for("sim_slam") if not (args.headless and s.name == "web")]
     print(f"SAGE SLAM in simulation: {', '.join(s.name for s in specs)}; Ctrl-C to stop and save")

@@ -108,6 +108,11 @@ class Clock(ABC):
         return await asyncio.to_thread(fn, *args)
 
 
+def _retrieve(future: asyncio.Future[Any]) -> None:
+    if not future.cancelled():
+        future.exception()
+
+
 class WallClock(Clock):
     """Real time. ``now()`` is the epoch time; sleeps use the monotonic clock."""
 
@@ -194,6 +199,8 @@ class SimClock(Clock):
         try:
             if not self._driven:  # nobody steps (yet): the thread itself, or a hand-over
                 finished: asyncio.Future[Any] = asyncio.wrap_future(thread)
+                # the caller takes a failure from thread.result(); this copy's is not "never retrieved"
+                finished.add_done_callback(_retrieve)
                 either: set[asyncio.Future[Any]] = {finished, release}
                 await asyncio.wait(either, return_when=asyncio.FIRST_COMPLETED)
             if self._driven and not release.done():

@@ -281,5 +281,10 @@ class SlamSettings(Section):
         description="The lidar's range noise, 1 sigma, as a fraction of the range (RPLIDAR A1M8: 0.01); "
         "> 0 uses the settings for such a lidar (docs/slam.md), 0 the engine's (a survey-grade scanner).",
     )
+    use_imu: bool = Field(
+        True,
+        description="Turn the odometry with the gyro's yaw rate while /imu/data is published "
+        "(mcu.imu_enabled, `--imu`); the wheels' turns where it is not (docs/slam.md).",
+    )
     map_period_s: float = Field(1.0, gt=0, description="Publish the growing /map at most this often (s).")
     out_dir: str = Field("", description="Where maps are saved; empty = <state dir>/maps.")

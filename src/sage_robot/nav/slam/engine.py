@@ -63,6 +63,11 @@ class SlamConfig:
     prior_sigma_xy_m: float = 0.02
     prior_sigma_xy_fraction: float = 0.1
     prior_sigma_theta_rad: float = 0.2  # wheel odometry turns badly: keep this weak
+    # A step whose turn a gyro measured (add_scan(..., gyro=True); :mod:`gyro`): its heading
+    # noise, for the ICP prior and odometry edges instead of the wheels' weak ones above and
+    # below: this base (rad) plus this fraction of the step's turn (the gyro's scale error).
+    gyro_sigma_theta_rad: float = 0.002
+    gyro_sigma_turn_fraction: float = 0.02
     odom_sigma_xy_m: float = 0.05  # odometry edge noise: base + fraction of the motion
     odom_sigma_theta_rad: float = 0.03
     odom_sigma_fraction: float = 0.2
@@ -151,12 +156,17 @@ class Slam:
         self._last_odom: Pose | None = None
         self._last_step: Pose = (0.0, 0.0, 0.0)  # estimated motion between the last two scans
         self._step_dist = 0.0  # odometry translation since the previous scan (m)
+        self._step_turn = 0.0  # odometry turn since the previous scan (rad)
+        self._step_gyro = False  # ...measured by a gyro
+        self._gyro_since_keyframe = False  # every step since the last keyframe was
         self._local: PointMap | None = None
         self._since_loop_try = 0
         self.odometry_calibration = OdometryCalibration()
 
     # ------------------------------------------------------------------ per scan
-    def add_scan(self, stamp: float, odom: Pose, scan: Scan) -> StepResult:
+    def add_scan(self, stamp: float, odom: Pose, scan: Scan, gyro: bool = False) -> StepResult:
+        """Track one scan taken at the odometry pose ``odom``; ``gyro``: the odometry's turn
+        since the previous scan is a gyro's (:mod:`~sage_robot.nav.slam.gyro`)."""
         cfg = self.config
         q = voxel_filter(self._scan_points(scan), cfg.scan_voxel_m)
         if self._last_odom is None and self.keyframes:  # a resumed session: start at its last keyframe
@@ -170,6 +180,9 @@ class Slam:
         predicted = compose(self.pose, step)
         self._last_odom = odom
         self._step_dist = math.hypot(step[0], step[1])
+        self._step_turn = abs(step[2])
+        self._step_gyro = gyro
+        self._gyro_since_keyframe &= gyro
         view = (scan.laser[0], scan.laser[1])
         match = self._track(q, predicted, view)
         if self._doubtful(step, match):
@@ -215,6 +228,12 @@ class Slam:
         step = relative(a, b)
         return self.odometry_calibration.correct(step) if self.config.calibrate_odometry else step
 
+    def _heading_sigma(self, gyro: bool, turn: float, wheels: float) -> float:
+        """Noise (rad, 1 sigma) of the odometry's heading over a step that turned ``turn``
+        (rad): a gyro's, else ``wheels``."""
+        cfg = self.config
+        return cfg.gyro_sigma_theta_rad + cfg.gyro_sigma_turn_fraction * turn if gyro else wheels
+
     def _doubtful(self, step: Pose, match: Match | None) -> bool:
         """Is the odometry step or its match suspicious?"""
         cfg = self.config
@@ -228,15 +247,16 @@ class Slam:
         if self._local is None or len(q) < MIN_SCAN_POINTS:
             return None
         sxy = cfg.prior_sigma_xy_m + cfg.prior_sigma_xy_fraction * self._step_dist
+        sth = self._heading_sigma(self._step_gyro, self._step_turn, cfg.prior_sigma_theta_rad)
         init, _ = self._local.search(
             q,
             predicted,
             cfg.search_xy_m,
             cfg.search_theta_rad,
             cfg.search_theta_step_rad,
-            prior_sigma=(SEARCH_PRIOR_SCALE * sxy, SEARCH_PRIOR_SCALE * cfg.prior_sigma_theta_rad),
+            prior_sigma=(SEARCH_PRIOR_SCALE * sxy, SEARCH_PRIOR_SCALE * sth),
         )
-        prior_info = np.diag([sxy**-2, sxy**-2, cfg.prior_sigma_theta_rad**-2])
+        prior_info = np.diag([sxy**-2, sxy**-2, sth**-2])
         return self._local.refine(q, init, predicted, prior_info, view)
 
     # ------------------------------------------------------------------ keyframes
@@ -266,8 +286,13 @@ class Slam:
             odo = self._odometry_step(self.keyframes[i].odom, odom)
             dist = math.hypot(odo[0], odo[1])
             sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
-            sth = cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * abs(odo[2])
+            sth = self._heading_sigma(
+                self._gyro_since_keyframe,
+                abs(odo[2]),
+                cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * abs(odo[2]),
+            )
             self.graph.add_edge(i, node, odo, np.diag([sxy**-2, sxy**-2, sth**-2]), KIND_ODOM)
+        self._gyro_since_keyframe = True
         self._rebuild_local()
 
     def _points_of(self, indices: range | list[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -384,6 +409,7 @@ class Slam:
         if self.keyframes:
             self.pose = self.graph.poses[-1]
             self._last_odom = None
+            self._gyro_since_keyframe = False  # the new session's odometry starts here
             self._rebuild_local()
 
     # ------------------------------------------------------------------ results

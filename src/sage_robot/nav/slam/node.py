@@ -1,7 +1,9 @@
 """The ``slam`` node: online mapping from ``/scan`` + ``/odom`` while an operator drives.
 
 - subscribes ``/scan`` (newest only: a scan that arrives while one is being matched replaces
-  the waiting one) and ``/odom`` (the latest pose is paired with each scan);
+  the waiting one) and ``/odom`` (the pose at each scan's stamp is interpolated), and with
+  ``slam.use_imu`` ``/imu/data``: while the gyro's samples come, each odometry step turns by
+  the gyro's heading instead of the wheels' (:mod:`sage_robot.nav.slam.gyro`);
 - publishes the growing map on ``/map`` (latched) every ``slam.map_period_s`` (1 s) when it
   changed, and a :class:`SlamProgress` on ``/slam/progress`` (latched) and the map->odom
   correction on ``/localization/map_odom`` (as localization does) after each scan;
@@ -29,11 +31,12 @@ from sage_robot.core import topics
 from sage_robot.core.bus import Topic
 from sage_robot.core.config.areas import SlamSettings
 from sage_robot.core.geometry import compose, inverse
-from sage_robot.core.msgs import LaserScan, OccupancyGrid, Odometry, Pose2D, PoseStamped
+from sage_robot.core.msgs import Imu, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseStamped
 from sage_robot.core.node import Node
 from sage_robot.core.paths import state_dir
 from sage_robot.core.resources import ResourceKey, Resources
 from sage_robot.nav.slam.engine import Slam, SlamConfig
+from sage_robot.nav.slam.gyro import GyroHeading, GyroOdometry
 from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgress
 from sage_robot.nav.slam.occupancy import OccupancyMapper
 from sage_robot.nav.slam.points import Pose, Scan
@@ -41,6 +44,7 @@ from sage_robot.nav.slam.store import save_session
 from sage_robot.nav.slam.tuning import noisy_lidar_config
 
 ODOM_HISTORY = 50  # odometry messages kept to interpolate at scan times (1 s at 50 Hz)
+IMU_QUEUE = 100  # gyro samples that may wait for the node (1 s at 100 Hz)
 SLAM_PROGRESS = Topic("/slam/progress", SlamProgress, latched=True)
 SLAM_SAVE = "/slam/save"  # service: SaveMapRequest -> SaveMapReply
 OUT_DIR_RESOURCE: ResourceKey[str | Path] = ResourceKey("slam_out_dir")  # where /slam/save writes by default
@@ -70,6 +74,11 @@ class SlamNode(Node):
         self.bus.declare(SLAM_PROGRESS, latched=True)  # the web page asks for the last
         self._odom_history: deque[tuple[float, Pose]] = deque(maxlen=ODOM_HISTORY)
         self.subscribe(topics.ODOM, Odometry, self._on_odom, maxsize=ODOM_HISTORY)
+        self._gyro = GyroHeading()
+        self._fused = GyroOdometry()
+        self.gyro_scans = 0  # scans whose odometry step the gyro turned
+        if self.config.use_imu:
+            self.subscribe(topics.IMU, Imu, self._on_imu, maxsize=IMU_QUEUE)
         self._scan_sub = self.subscribe(topics.SCAN, LaserScan, maxsize=1)
         self.bus.serve(SLAM_SAVE, self._on_save)
         self.spawn(self._scan_loop(), name="slam.scans")
@@ -92,15 +101,20 @@ class SlamNode(Node):
         self._odom = msg
         self._odom_history.append((msg.stamp, msg.pose.as_tuple()))
 
+    def _on_imu(self, msg: Imu) -> None:
+        self._gyro.add(msg.stamp, msg.angular_velocity[2])
+
     async def _scan_loop(self) -> None:
         async for msg in self._scan_sub:
             if self._odom is None:
                 continue  # no odometry yet: nothing to predict from
             odom = odom_at(list(self._odom_history), msg.stamp)
+            fused, gyro = self._fused.step(odom, self._gyro.at(msg.stamp))
             scan = Scan(np.asarray(msg.ranges), msg.angles, msg.range_min, msg.range_max, self.laser)
             async with self._lock:
-                result = await self.clock.offload(self._process, msg.stamp, odom, scan)
+                result = await self.clock.offload(self._process, msg.stamp, fused, scan, gyro)
             self.scans += 1
+            self.gyro_scans += gyro
             x, y, th = result.pose
             # map -> odom, as localization publishes it: pages draw the robot on the growing map.
             correction = Pose2D(*compose(result.pose, inverse(odom)))
@@ -118,8 +132,8 @@ class SlamNode(Node):
                 ),
             )
 
-    def _process(self, stamp: float, odom: tuple[float, float, float], scan: Scan) -> Any:
-        result = self.slam.add_scan(stamp, odom, scan)
+    def _process(self, stamp: float, odom: Pose, scan: Scan, gyro: bool) -> Any:
+        result = self.slam.add_scan(stamp, odom, scan, gyro)
         self._update_map()
         return result
 
@@ -163,6 +177,7 @@ class SlamNode(Node):
     def stats(self) -> dict[str, Any]:
         return {
             "scans": self.scans,
+            "gyro_scans": self.gyro_scans,
             "keyframes": len(self.slam.keyframes),
             "loop_closures": self.slam.loop_closures,
             "score": round(self.slam.last_score, 3),

@@ -1,0 +1,83 @@
+"""The gyro's heading for SLAM: integrating the yaw rate, and wheel odometry turned by it."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sage_robot.nav.slam.gyro import GyroHeading, GyroOdometry
+
+RATE_HZ = 100.0
+
+
+def _feed(gyro: GyroHeading, t0: float, t1: float, rate: float) -> None:
+    n = round((t1 - t0) * RATE_HZ)
+    for i in range(n + 1):
+        gyro.add(t0 + i / RATE_HZ, rate)
+
+
+def _heading(gyro: GyroHeading, stamp: float) -> float:
+    """The heading at ``stamp``, which must be in the first segment."""
+    at = gyro.at(stamp)
+    assert at is not None
+    assert at[0] == 0
+    return at[1]
+
+
+def test_a_constant_rate_integrates_to_its_heading_and_interpolates_between_samples() -> None:
+    gyro = GyroHeading()
+    _feed(gyro, 10.0, 11.0, 0.5)
+    start = _heading(gyro, 10.0)
+    assert _heading(gyro, 11.0) == pytest.approx(start + 0.5)
+    assert _heading(gyro, 10.505) == pytest.approx(start + 0.2525)
+    # a scan may come before the next sample: at most max_gap_s ahead, at the last rate
+    assert _heading(gyro, 11.05) == pytest.approx(start + 0.525)
+    assert gyro.at(11.2) is None
+    assert gyro.at(8.0) is None  # before the first sample
+
+
+def test_a_changing_rate_is_integrated_by_trapezoids() -> None:
+    gyro = GyroHeading()
+    for i in range(101):  # the rate ramps 0 -> 1 rad/s over 1 s: the heading is t^2 / 2
+        gyro.add(i / RATE_HZ, i / RATE_HZ)
+    assert _heading(gyro, 1.0) == pytest.approx(0.5)
+
+
+def test_a_silence_breaks_the_heading_and_old_samples_are_dropped() -> None:
+    gyro = GyroHeading(max_gap_s=0.1, history_s=2.0)
+    _feed(gyro, 0.0, 1.0, 1.0)
+    _feed(gyro, 1.5, 2.5, 1.0)  # 0.5 s without a sample
+    before, after = gyro.at(0.9), gyro.at(2.0)
+    assert before is not None
+    assert after is not None
+    assert before[0] != after[0]  # different segments: not to be compared
+    assert gyro.at(1.3) is None  # inside the gap
+    gyro.add(2.4, 5.0)  # older than the last sample: ignored
+    assert gyro.at(2.5)[1] == pytest.approx(after[1] + 0.5)  # type: ignore[index]
+    _feed(gyro, 2.51, 5.0, 1.0)
+    assert gyro.at(2.0) is None  # more than history_s ago
+
+
+def test_the_fused_odometry_takes_the_wheels_travel_and_the_gyros_turn() -> None:
+    fuse = GyroOdometry()
+    assert fuse.step((1.0, 2.0, 0.0), (0, 0.0)) == ((1.0, 2.0, 0.0), False)
+    # the wheels say 1 m ahead and a 0.3 rad turn; the gyro says 0.2 rad
+    pose, gyro = fuse.step((2.0, 2.0, 0.3), (0, 0.2))
+    assert gyro
+    assert pose == pytest.approx((2.0, 2.0, 0.2))
+    # the next metre goes along the fused heading, not the wheels'
+    wheels = (2.0 + math.cos(0.3), 2.0 + math.sin(0.3), 0.3)
+    pose, gyro = fuse.step(wheels, (0, 0.2))
+    assert gyro
+    assert pose == pytest.approx((2.0 + math.cos(0.2), 2.0 + math.sin(0.2), 0.2))
+    # no gyro heading (or a new segment): the wheels' turn
+    pose, gyro = fuse.step((wheels[0], wheels[1], 0.4), None)
+    assert not gyro
+    assert pose[2] == pytest.approx(0.3)
+    pose, gyro = fuse.step((wheels[0], wheels[1], 0.5), (1, 7.0))
+    assert not gyro  # the previous step had none
+    assert pose[2] == pytest.approx(0.4)
+    pose, gyro = fuse.step((wheels[0], wheels[1], 0.5), (1, 7.1))
+    assert gyro
+    assert pose[2] == pytest.approx(0.5)
