@@ -60,6 +60,30 @@ def test_odometry_scale_and_heading_drift_are_learnt_where_the_scans_pin_the_pos
     assert abs(corrected[2]) < 0.0002
 
 
+def test_the_turn_scale_is_learnt_from_turns_between_matched_scans() -> None:
+    """Turns on the spot (0.2 rad a scan) read 2 % too much; after 3 rad of comparison the
+    calibration scales them back, also across the ±pi seam and for turns either way."""
+    cal = OdometryCalibration()
+    pose = odom = (0.0, 0.0, 0.0)
+    everywhere = np.diag([1e4, 1e4, 1e5])
+    for k in range(60):
+        turn = 0.2 if (k // 20) % 2 == 0 else -0.2  # a full turn left, then right, then left
+        pose, odom = compose(pose, (0.0, 0.0, turn)), compose(odom, (0.0, 0.0, turn * 1.02))
+        cal.observe(pose, odom, everywhere)
+        if k == 10:
+            assert not cal.turn_calibrated  # 2 rad compared: not yet
+            assert cal.correct((0.0, 0.0, 0.2)) == (0.0, 0.0, 0.2)
+    assert cal.turn_calibrated
+    assert abs(cal.turn_scale - 1 / 1.02) < 0.002
+    assert abs(cal.correct((0.0, 0.0, 0.204))[2] - 0.2) < 0.0005
+    # an unmatched scan ends the turn being compared: nothing learnt from it
+    before = cal.turn_scale
+    for _ in range(10):
+        odom = compose(odom, (0.0, 0.0, 0.3))
+        cal.observe(pose, odom, None)
+    assert cal.turn_scale == before
+
+
 def test_a_corridor_match_teaches_the_odometry_nothing() -> None:
     cal = OdometryCalibration()
     pose = odom = (0.0, 0.0, 0.0)

@@ -12,6 +12,11 @@ of travel at least ``MIN_ISOTROPY`` of the strongest direction's (or ``MIN_ALONG
 is at least
 ``BASELINE_M`` long (the matcher's centimetre noise then weighs little). Poses (x, y m;
 theta rad).
+
+The turns' scale too (the wheels' track width, a gyro's sensitivity: both read a turn a
+percent or two off): the matched turn over the odometry's, from turns of at least
+``TURN_BASELINE_RAD`` between two matched scans (a bare corridor pins the heading down even
+where it says nothing about the travel), less the heading drift learnt above.
 """
 
 from __future__ import annotations
@@ -34,6 +39,12 @@ MEMORY_M = 200.0  # older stretches fade out over about this many metres
 SCALE_LIMITS = (0.8, 1.2)  # a scale outside this is not believed
 MAX_YAW_DRIFT_RAD_PER_M = 0.05
 MIN_CALIBRATED_M = 4.0  # corrections apply once this much odometry has been compared
+# The turn scale (matched turn / odometry turn): from turns of at least TURN_BASELINE_RAD
+# between two matched scans (the scans pin the heading down as well in a bare corridor)
+TURN_BASELINE_RAD = 1.0
+TURN_MEMORY_RAD = 30.0  # older turns fade out over about this much turning
+TURN_SCALE_LIMITS = (0.9, 1.1)
+MIN_CALIBRATED_TURN_RAD = 3.0  # the turn scale applies once this much turning has been compared
 
 
 @dataclass
@@ -50,21 +61,33 @@ class OdometryCalibration:
         self._sum_odom = 0.0
         self._sum_yaw = 0.0  # decaying sum of heading differences (rad)
         self._anchor: _Anchor | None = None
+        self.turn_scale = 1.0
+        self._sum_turn_est = 0.0  # decaying sums of matched and odometry turns (rad)
+        self._sum_turn_odom = 0.0
+        self._turn_anchor: _Anchor | None = None
+        self._turned = 0.0  # odometry turn since the turn anchor (rad, signed)
+        self._last_odom: Pose | None = None
 
     @property
     def calibrated(self) -> bool:
         return self._sum_odom >= MIN_CALIBRATED_M
 
+    @property
+    def turn_calibrated(self) -> bool:
+        return self._sum_turn_odom >= MIN_CALIBRATED_TURN_RAD
+
     def correct(self, step: Pose) -> Pose:
         """An odometry increment (robot frame) with the calibration applied."""
+        turn = self.turn_scale * step[2] if self.turn_calibrated else step[2]
         if not self.calibrated:
-            return step
+            return (step[0], step[1], turn)
         dist = math.hypot(step[0], step[1])
-        return (self.scale * step[0], self.scale * step[1], step[2] - self.yaw_per_m * dist)
+        return (self.scale * step[0], self.scale * step[1], turn - self.yaw_per_m * dist)
 
     def observe(self, pose: Pose, odom: Pose, information: np.ndarray | None) -> None:
         """Feed one matched scan: its pose, the raw odometry pose and the match's information
         (None: not matched, which ends the current stretch)."""
+        self._observe_turn(pose, odom, information is not None)
         if information is None:
             self._anchor = None
             return
@@ -89,6 +112,32 @@ class OdometryCalibration:
         self.scale = min(max(scale, SCALE_LIMITS[0]), SCALE_LIMITS[1])
         yaw = self._sum_yaw / self._sum_odom
         self.yaw_per_m = min(max(yaw, -MAX_YAW_DRIFT_RAD_PER_M), MAX_YAW_DRIFT_RAD_PER_M)
+
+    def _observe_turn(self, pose: Pose, odom: Pose, matched: bool) -> None:
+        """The turn scale: matched turn / odometry turn over turns between matched scans."""
+        if self._last_odom is not None:
+            self._turned += math.remainder(odom[2] - self._last_odom[2], 2 * math.pi)
+        self._last_odom = odom
+        if not matched:
+            self._turn_anchor, self._turned = None, 0.0
+            return
+        if self._turn_anchor is None:
+            self._turn_anchor, self._turned = _Anchor(pose, odom), 0.0
+            return
+        if abs(self._turned) < TURN_BASELINE_RAD:
+            return
+        d_odom = relative(self._turn_anchor.odom, odom)
+        drift = self.yaw_per_m * math.hypot(d_odom[0], d_odom[1]) if self.calibrated else 0.0
+        odom_turn = self._turned - drift
+        # the matched turn is the one nearest the odometry's (it may pass a full turn)
+        d_est = math.remainder(pose[2] - self._turn_anchor.pose[2], 2 * math.pi)
+        est_turn = d_est + 2 * math.pi * round((odom_turn - d_est) / (2 * math.pi))
+        self._turn_anchor, self._turned = _Anchor(pose, odom), 0.0
+        keep = math.exp(-abs(odom_turn) / TURN_MEMORY_RAD)
+        self._sum_turn_est = keep * self._sum_turn_est + est_turn * math.copysign(1.0, odom_turn)
+        self._sum_turn_odom = keep * self._sum_turn_odom + abs(odom_turn)
+        ratio = self._sum_turn_est / self._sum_turn_odom
+        self.turn_scale = min(max(ratio, TURN_SCALE_LIMITS[0]), TURN_SCALE_LIMITS[1])
 
     def _pinned(self, pose: Pose, information: np.ndarray) -> bool:
         """Does the match pin the pose down along the direction of travel (map frame)? At the
