@@ -6,7 +6,10 @@ import math
 
 import pytest
 
+from sage_robot.nav.slam.engine import Slam
 from sage_robot.nav.slam.gyro import GyroHeading, GyroOdometry
+
+from .synth import corridor_loop, loop_path, simulate
 
 RATE_HZ = 100.0
 
@@ -81,3 +84,30 @@ def test_the_fused_odometry_takes_the_wheels_travel_and_the_gyros_turn() -> None
     pose, gyro = fuse.step((wheels[0], wheels[1], 0.5), (1, 7.1))
     assert gyro
     assert pose[2] == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("gyro", [False, True])
+def test_the_trackers_glitch_guesses_keep_the_gyros_turn(gyro: bool) -> None:
+    """A doubtful match makes the tracker also try "as the last step" and "no motion" (the
+    wheels freeze, then jump); a turn the gyro measured stays in both guesses."""
+    truth = loop_path(step_m=0.3)[:3]
+    drive = simulate(corridor_loop(), truth)
+    slam = Slam()
+    for k in range(2):
+        slam.add_scan(0.2 * k, drive.odom[k], drive.scans[k], gyro=gyro)
+    guesses: list[tuple[float, float, float]] = []
+
+    def fake_track(q: object, predicted: tuple[float, float, float], view: object) -> None:
+        guesses.append(predicted)  # and no match: the match is doubtful
+
+    slam._track = fake_track  # type: ignore[method-assign]
+    pose = slam.pose
+    odom = (drive.odom[1][0], drive.odom[1][1], drive.odom[1][2] + 0.1)  # turned 0.1 rad on the spot
+    slam.add_scan(0.4, odom, drive.scans[1], gyro=gyro)
+    assert len(guesses) == 3  # the odometry's prediction, then the two glitch guesses
+    turns = [math.remainder(g[2] - pose[2], 2 * math.pi) for g in guesses]
+    assert turns[0] == pytest.approx(0.1)
+    if gyro:
+        assert turns[1:] == [pytest.approx(0.1), pytest.approx(0.1)]
+    else:
+        assert turns[2] == pytest.approx(0.0)  # "no motion": the wheels' turn is doubted too

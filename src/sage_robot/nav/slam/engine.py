@@ -187,8 +187,12 @@ class Slam:
         match = self._track(q, predicted, view)
         if self._doubtful(step, match):
             # Odometry glitches (frozen, then a jump) happen: also try "as the last step" and
-            # "no motion", and keep the prediction whose match fits best.
-            for guess in (compose(self.pose, self._last_step), self.pose):
+            # "no motion", and keep the prediction whose match fits best. The wheels glitch,
+            # not the gyro: a step it turned keeps its turn in both guesses.
+            last, still = self._last_step, (0.0, 0.0, 0.0)
+            if gyro:
+                last, still = (last[0], last[1], step[2]), (0.0, 0.0, step[2])
+            for guess in (compose(self.pose, last), compose(self.pose, still)):
                 other = self._track(q, guess, view)
                 if other is not None and (match is None or other.inliers > match.inliers + GLITCH_MARGIN):
                     match, predicted = other, guess
