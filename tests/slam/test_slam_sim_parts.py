@@ -9,7 +9,7 @@ import numpy as np
 
 from sage_robot.core.geometry import compose
 from sage_robot.nav.slam.dynamic import small_foreground, supported
-from sage_robot.nav.slam.mapscore import score_map
+from sage_robot.nav.slam.mapscore import score_map, wall_distance
 from sage_robot.nav.slam.matcher import MatchConfig, PointMap
 from sage_robot.nav.slam.odomcal import OdometryCalibration
 from sage_robot.sim.raycast import ray_circles
@@ -29,6 +29,15 @@ def test_a_perfect_map_scores_zero_and_a_shifted_one_does_not() -> None:
     off = score_map(truth, shifted, seen)
     assert off.wall_distance_mean_m > 0.05
     assert off.walls_found < 0.95
+
+
+def test_a_return_just_behind_a_wall_on_the_maps_edge_is_as_near_as_one_in_front() -> None:
+    truth = room(6.0, 4.0, wall_cells=2)  # the walls are the grid's outermost cells
+    x0, res = truth.origin.x, truth.resolution
+    y = truth.origin.y + 2.0
+    near = wall_distance(truth, np.array([[x0 + 2 * res + 0.05, y], [x0 - 0.05, y], [x0 - 3.0, y]]))
+    assert np.allclose(near[:2], 0.05)
+    assert np.isinf(near[2])  # farther off the grid than FAR_M: as far as it gets
 
 
 def test_legs_in_front_of_a_wall_are_small_foreground_and_the_wall_is_not() -> None:

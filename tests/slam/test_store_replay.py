@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -10,6 +12,7 @@ import pytest
 import yaml
 
 from sage_robot.core.errors import ConfigError
+from sage_robot.core.geometry import relative
 from sage_robot.core.mapio import read_map, world_to_cell
 from sage_robot.nav.slam.engine import Keyframe, Slam
 from sage_robot.nav.slam.occupancy import OccupancyMapper
@@ -24,8 +27,8 @@ CSAIL = "slam/mit-csail/mit-csail.clf"
 CSAIL_RELATIONS = "slam/mit-csail/mit-csail.relations"
 
 
-def short_session(n: int = 40) -> tuple[Slam, list[Pose], list[Scan]]:
-    truth = loop_path(step_m=0.35)[:n]
+def short_session(n: int = 40, step_m: float = 0.35) -> tuple[Slam, list[Pose], list[Scan]]:
+    truth = loop_path(step_m=step_m)[:n]
     drive = simulate(corridor_loop(), truth, yaw_drift=0.01)
     slam = Slam(initial_pose=truth[0])
     for k in range(n):
@@ -34,7 +37,7 @@ def short_session(n: int = 40) -> tuple[Slam, list[Pose], list[Scan]]:
 
 
 def test_save_load_round_trip_and_resume(tmp_path: Path) -> None:
-    slam, _odom, scans = short_session()
+    slam, _odom, scans = short_session(step_m=0.1)
     paths = save_session(slam, tmp_path / "out", "floor1")
     assert set(paths) == {"yaml", "pgm", "graph", "trajectory"}
     meta = yaml.safe_load(Path(paths["yaml"]).read_text())
@@ -59,10 +62,47 @@ def test_save_load_round_trip_and_resume(tmp_path: Path) -> None:
         assert ka.odom == kb.odom
         assert ka.stamp == kb.stamp
     assert back.config == slam.config
+    # The scans between keyframes that the grid is made of come back too, in their order.
+    assert back.map_scan_count == slam.map_scan_count > len(slam.keyframes)
+    (poses_a, scans_a), (poses_b, scans_b) = back.map_scans(), slam.map_scans()
+    np.testing.assert_allclose(poses_a, poses_b)
+    for sa, sb in zip(scans_a, scans_b, strict=True):
+        np.testing.assert_array_equal(sa.ranges, sb.ranges)
+    rebuilt = build_map(back).data  # angles are saved as float32: the drawn world puts many
+    # beams exactly on cell borders, and a few of those fall the other way
+    assert rebuilt.shape == built.data.shape
+    assert (rebuilt == built.data).mean() > 0.99
     # Resume: the robot is where the session ended; a new scan there matches the old map.
     result = back.add_scan(99.0, (5.0, 5.0, 1.0), scans[-1])
     assert result.inliers > 0.9
     assert np.hypot(result.pose[0] - slam.pose[0], result.pose[1] - slam.pose[1]) < 0.05
+
+
+def test_the_grid_is_made_of_keyframes_and_the_scans_between_them() -> None:
+    slam, _, _ = short_session(step_m=0.1)
+    poses, scans = slam.map_scans()
+    assert len(poses) == slam.map_scan_count
+    keyframe_scans = [kf.scan for kf in slam.keyframes]
+    assert sum(any(s is k for k in keyframe_scans) for s in scans) == len(slam.keyframes)
+    cfg = slam.config
+    for k, kf in enumerate(slam.keyframes):
+        last = (0.0, 0.0, 0.0)  # each map scan is far enough from the one before it
+        for offset, _ in kf.map_scans:
+            since = relative(last, offset)
+            far = math.hypot(since[0], since[1]) >= cfg.map_scan_dist_m
+            assert far or abs(since[2]) >= cfg.map_scan_angle_rad
+            last = offset
+        assert [p for p, s in zip(poses, scans, strict=True) if s is kf.scan] == [slam.graph.poses[k]]
+    # Following other keyframe poses (the graph moved into another frame) moves them all.
+    shifted = [(x + 1.0, y, th) for x, y, th in slam.keyframe_poses()]
+    moved, _ = slam.map_scans(poses=shifted)
+    np.testing.assert_allclose(np.array(moved)[:, 0], np.array(poses)[:, 0] + 1.0)
+    # Keyframes only: as many grid scans as keyframes.
+    few = Slam(dataclasses.replace(cfg, map_scan_dist_m=0.0), initial_pose=slam.initial_pose)
+    _, odom, all_scans = short_session(step_m=0.1)
+    for k, scan in enumerate(all_scans):
+        few.add_scan(0.1 * k, odom[k], scan)
+    assert few.map_scan_count == len(few.keyframes)
 
 
 def test_bad_names_and_files(tmp_path: Path) -> None:

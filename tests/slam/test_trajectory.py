@@ -57,3 +57,16 @@ def test_shapes_that_cannot_be_aligned_are_a_clear_error() -> None:
         align(np.zeros((3, 2)), np.zeros((4, 2)))
     with pytest.raises(ValueError, match="N ≥ 2"):
         align(np.zeros((1, 2)), np.zeros((1, 2)))
+
+
+def test_an_alignment_moves_poses_as_it_moves_positions() -> None:
+    rng = np.random.default_rng(3)
+    true = np.cumsum(rng.normal(0, 0.3, (50, 2)), axis=0)
+    est = _turned(true, 0.4, (1.0, 2.0), scale=0.9)
+    for fit in (align(est, true), align(est, true, with_scale=True)):
+        moved = np.array([fit.apply((x, y, 0.1)) for x, y in est])
+        want = fit.scale * _turned(est, fit.rotation_rad, (0.0, 0.0)) + fit.translation
+        assert np.allclose(moved[:, :2], want)
+        assert np.allclose(moved[:, 2], 0.1 + fit.rotation_rad)
+    similar = align(est, true, with_scale=True)
+    assert np.allclose(np.array([similar.apply((x, y, 0.0)) for x, y in est])[:, :2], true)

@@ -24,7 +24,9 @@ Scores, against the true poses and the true map (with its clutter):
 - ``return_error_m``: the position error at the end of the drive (back at the start for
   ``auto``: the map keeps its shape when the robot returns);
 - map agreement (:mod:`sage_robot.nav.slam.mapscore`): mean distance from the mapped walls
-  to the true walls, and the fraction of the true walls the lidar hit that are mapped;
+  to the true walls, and the fraction of the true walls the lidar hit that are mapped, with
+  the map put into the true frame by the trajectory's rigid alignment (``*_unaligned``: as
+  mapped, from the true first pose);
 - navigation on the map: a path planned by ``nav.planner`` on the SLAM map from the start to
   the drive's farthest point keeps ``NAV_CLEARANCE_M`` from the true walls.
 """
@@ -134,7 +136,12 @@ def run_check(
     moved = np.hypot(*np.diff(true_xy, axis=0).T)
     rigid, similar = align(est[:, :2], true_xy), align(est[:, :2], true_xy, with_scale=True)
     mapped = build_map(slam)
-    score = score_map(world.grid, mapped, world.seen >= MIN_SEEN_HITS)
+    seen = world.seen >= MIN_SEEN_HITS
+    # The map is scored in the true frame after the trajectory's rigid alignment (a map is
+    # defined up to where it is put; the unaligned score also counts the drift from the start).
+    in_truth = build_map(slam, poses=[rigid.apply(p) for p in slam.keyframe_poses()])
+    score = score_map(world.grid, in_truth, seen)
+    unaligned = score_map(world.grid, mapped, seen)
     far = truth[int(np.argmax(np.hypot(*(true_xy - true_xy[0]).T)))]
     return {
         "map": str(path),
@@ -158,6 +165,8 @@ def run_check(
         "odometry_end_error_m": round(math.dist(world.odom[:2], truth[-1][:2]), 3),
         **score.as_dict(),
         "occupied_recall": round(score.walls_found, 4),
+        "wall_distance_mean_unaligned_m": round(unaligned.wall_distance_mean_m, 4),
+        "walls_found_unaligned": round(unaligned.walls_found, 4),
         **_navigate(mapped, world.caster, truth[0], far),
     }
 

@@ -96,6 +96,11 @@ class SlamConfig:
     map_support_cell_m: float = 0.15
     # > 0: returns of foreground objects no wider than this (m: legs) are left out of matching
     drop_small_objects_m: float = 0.0
+    # The occupancy grid is made of the keyframes' scans and, between keyframes, of one
+    # tracked scan per this much travel or turning (a wall seen only between two keyframes,
+    # through a door on the way past, is mapped too); 0: keyframes only.
+    map_scan_dist_m: float = 0.1
+    map_scan_angle_rad: float = 0.1
     match: MatchConfig = field(default_factory=MatchConfig)
 
     def __post_init__(self) -> None:  # a saved session's JSON gives lists back
@@ -110,6 +115,8 @@ class Keyframe:
     points: np.ndarray  # robot frame, map_voxel_m filtered
     travel_m: float  # trajectory length up to here
     normals: np.ndarray | None = None  # of the points, robot frame (computed once)
+    # scans tracked after this keyframe, for the occupancy grid: (pose relative to it, scan)
+    map_scans: list[tuple[Pose, Scan]] = field(default_factory=list)
 
     def point_normals(self) -> np.ndarray:
         """Unit normals, each turned to face the laser that saw its point (robot frame)."""
@@ -162,6 +169,10 @@ class Slam:
         self._local: PointMap | None = None
         self._since_loop_try = 0
         self.odometry_calibration = OdometryCalibration()
+        # the occupancy grid's scans in the order they came: (keyframe, -1 for its own scan
+        # or the index into its map_scans)
+        self._map_index: list[tuple[int, int]] = []
+        self._last_map_offset: Pose = (0.0, 0.0, 0.0)  # the last map scan, from its keyframe
 
     # ------------------------------------------------------------------ per scan
     def add_scan(self, stamp: float, odom: Pose, scan: Scan, gyro: bool = False) -> StepResult:
@@ -209,12 +220,25 @@ class Slam:
         moved = relative(last, pose)
         if math.hypot(moved[0], moved[1]) < cfg.keyframe_dist_m and abs(moved[2]) < cfg.keyframe_angle_rad:
             self.trajectory.append(_TrajectoryEntry(stamp, kf, moved))
+            if score > 0:
+                self._add_map_scan(kf, moved, scan)
             return StepResult(pose, score, inliers, False, False)
         info = match.information if match is not None and score > 0 else None
         self._add_keyframe(stamp, odom, scan, pose, info)
         self.trajectory.append(_TrajectoryEntry(stamp, len(self.keyframes) - 1, (0.0, 0.0, 0.0)))
         closed = self._try_loop_closure()
         return StepResult(self.pose, score, inliers, True, closed)
+
+    def _add_map_scan(self, kf: int, offset: Pose, scan: Scan) -> None:
+        """Keep this tracked scan for the occupancy grid when it is far enough from the last."""
+        cfg = self.config
+        if cfg.map_scan_dist_m <= 0:
+            return
+        since = relative(self._last_map_offset, offset)
+        if math.hypot(since[0], since[1]) >= cfg.map_scan_dist_m or abs(since[2]) >= cfg.map_scan_angle_rad:
+            self._map_index.append((kf, len(self.keyframes[kf].map_scans)))
+            self.keyframes[kf].map_scans.append((offset, scan))
+            self._last_map_offset = offset
 
     def _scan_points(self, scan: Scan) -> np.ndarray:
         """Robot-frame end points of the returns used for matching (small foreground left out)."""
@@ -276,6 +300,8 @@ class Slam:
             travel = prev.travel_m + math.hypot(step[0], step[1])
         node = self.graph.add_node(pose)
         self.keyframes.append(Keyframe(stamp, odom, scan, pts, travel))
+        self._map_index.append((node, -1))
+        self._last_map_offset = (0.0, 0.0, 0.0)
         if node > 0:
             i = node - 1
             z = relative(self.graph.poses[i], pose)
@@ -414,6 +440,7 @@ class Slam:
             self.pose = self.graph.poses[-1]
             self._last_odom = None
             self._gyro_since_keyframe = False  # the new session's odometry starts here
+            self._last_map_offset = (0.0, 0.0, 0.0)
             self._rebuild_local()
 
     # ------------------------------------------------------------------ results
@@ -423,6 +450,34 @@ class Slam:
 
     def keyframe_poses(self) -> list[Pose]:
         return list(self.graph.poses)
+
+    @property
+    def map_scan_count(self) -> int:
+        """How many scans the occupancy grid is made of (keyframes' and map scans)."""
+        return len(self._map_index)
+
+    def map_scans(self, start: int = 0, poses: list[Pose] | None = None) -> tuple[list[Pose], list[Scan]]:
+        """The occupancy grid's scans from the ``start``-th on, in the order they came, at their
+        optimised poses (or following ``poses``, one per keyframe: the graph's moved elsewhere)."""
+        base = self.graph.poses if poses is None else poses
+        out_poses: list[Pose] = []
+        out_scans: list[Scan] = []
+        for k, e in self._map_index[start:]:
+            kf = self.keyframes[k]
+            if e < 0:
+                out_poses.append(base[k])
+                out_scans.append(kf.scan)
+            else:
+                offset, scan = kf.map_scans[e]
+                out_poses.append(compose(base[k], offset))
+                out_scans.append(scan)
+        return out_poses, out_scans
+
+    def restore_map_index(self) -> None:
+        """After keyframes (and their map scans) were restored: each keyframe, then its scans."""
+        self._map_index = [
+            (k, e) for k, kf in enumerate(self.keyframes) for e in range(-1, len(kf.map_scans))
+        ]
 
     def trajectory_array(self) -> tuple[np.ndarray, np.ndarray]:
         """(stamps (N,), poses (N, 3)) of every scan, following the optimised keyframes."""

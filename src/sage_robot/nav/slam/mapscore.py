@@ -60,12 +60,17 @@ def cell_centres(grid: OccupancyGrid, mask: np.ndarray) -> np.ndarray:
 
 
 def wall_distance(truth: OccupancyGrid, pts: np.ndarray) -> np.ndarray:
-    """Distance (m) from map points to the nearest true wall cell's square (inf off the grid)."""
+    """Distance (m) from map points to the nearest true wall cell's square; points more than
+    ``FAR_M`` off the true grid are inf (a noisy return just behind a wall drawn on the map's
+    edge is as near that wall as one just in front of it)."""
     wall = truth.data >= OCCUPIED_MIN
     if not wall.any() or len(pts) == 0:
         return np.full(len(pts), np.inf)
+    pad = int(np.ceil(FAR_M / truth.resolution))
+    wall = np.pad(wall, pad)
     _, (feat_r, feat_c) = distance_transform_edt(~wall, return_indices=True)
     gx, gy = _cell_of(truth, pts[:, 0], pts[:, 1])
+    gx, gy = gx + pad, gy + pad
     col, row = np.floor(gx).astype(np.int64), np.floor(gy).astype(np.int64)
     h, w = wall.shape
     inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)

@@ -38,9 +38,8 @@ from sage_robot.core.resources import ResourceKey, Resources
 from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.gyro import GyroHeading, GyroOdometry
 from sage_robot.nav.slam.messages import SaveMapReply, SaveMapRequest, SlamProgress
-from sage_robot.nav.slam.occupancy import OccupancyMapper
 from sage_robot.nav.slam.points import Pose, Scan
-from sage_robot.nav.slam.store import save_session
+from sage_robot.nav.slam.store import mapper_for, save_session
 from sage_robot.nav.slam.tuning import noisy_lidar_config
 
 ODOM_HISTORY = 50  # odometry messages kept to interpolate at scan times (1 s at 50 Hz)
@@ -54,6 +53,18 @@ AUTOSAVE_RESOURCE = ResourceKey("slam_autosave", str)  # map name to save under 
 SAVED_RESOURCE: ResourceKey[dict[str, str]] = ResourceKey("slam_saved", dict)  # the autosave's paths
 
 
+@dataclasses.dataclass(frozen=True)
+class MapJob:
+    """Scans to draw into the grid: all of them again (``rebuild``) or the ones from ``start``."""
+
+    rebuild: bool
+    poses: list[Pose]
+    scans: list[Scan]
+    version: int  # the graph's version they are drawn at
+    start: int  # the first map scan's index
+    count: int  # map scans drawn once this is done
+
+
 class SlamNode(Node):
     name = "slam"
 
@@ -63,11 +74,12 @@ class SlamNode(Node):
         initial = self.ctx.resources.get(INITIAL_POSE_RESOURCE, (0.0, 0.0, 0.0))
         self.config = self.settings.slam
         self.slam = Slam(slam_config(self.config), initial_pose=initial)
-        self.mapper = OccupancyMapper(self.config.resolution_m, self.slam.config.max_range_m)
-        self._mapped_keyframes = 0
-        self._map_version = 0
-        self._map_dirty = False
-        self._lock = asyncio.Lock()
+        self.mapper = mapper_for(self.slam, self.config.resolution_m)
+        self._mapped_scans = 0  # map scans drawn into the grid
+        self._map_version = 0  # the graph's version the grid was drawn at
+        self._last_rebuild = -math.inf  # clock time (s) of the last full redraw
+        self._lock = asyncio.Lock()  # the SLAM state: one scan, save or map snapshot at a time
+        self._map_lock = asyncio.Lock()  # the grid: drawn outside the SLAM lock
         self._odom: Odometry | None = None
         self.scans = 0
         self.bus.declare(topics.MAP, OccupancyGrid, latched=True)
@@ -90,7 +102,7 @@ class SlamNode(Node):
         if not name or not getattr(self, "slam", None) or not self.slam.keyframes:
             return
         try:
-            async with self._lock:
+            async with self._lock, self._map_lock:
                 paths = await self.clock.offload(self._save, self.out_dir(), name)
             self.ctx.resources[SAVED_RESOURCE] = paths
             self.log.info("map saved on exit", **paths)
@@ -133,42 +145,52 @@ class SlamNode(Node):
             )
 
     def _process(self, stamp: float, odom: Pose, scan: Scan, gyro: bool) -> Any:
-        result = self.slam.add_scan(stamp, odom, scan, gyro)
-        self._update_map()
-        return result
+        return self.slam.add_scan(stamp, odom, scan, gyro)
 
-    def _update_map(self) -> None:
-        """Add new keyframes to the grid; rebuild it when the graph was optimised."""
-        slam = self.slam
-        if slam.map_version != self._map_version:
-            self.mapper.rebuild(slam.keyframe_poses(), [kf.scan for kf in slam.keyframes])
-            self._map_version, self._mapped_keyframes = slam.map_version, len(slam.keyframes)
-            self._map_dirty = True
-        elif len(slam.keyframes) > self._mapped_keyframes:
-            new = range(self._mapped_keyframes, len(slam.keyframes))
-            self.mapper.integrate_many(
-                [slam.graph.poses[k] for k in new], [slam.keyframes[k].scan for k in new]
-            )
-            self._mapped_keyframes = len(slam.keyframes)
-            self._map_dirty = True
+    def _map_job(self, full: bool) -> MapJob | None:
+        """What the grid needs from the SLAM state (taken under the SLAM lock, cheap): a full
+        redraw at the optimised poses when the graph changed (at most every
+        ``map_rebuild_period_s``, unless ``full``), else the map scans it lacks; None: nothing."""
+        slam, now = self.slam, self.clock.now()
+        stale = slam.map_version != self._map_version
+        if stale and (full or now - self._last_rebuild >= self.config.map_rebuild_period_s):
+            self._last_rebuild = now
+            return MapJob(True, *slam.map_scans(), slam.map_version, 0, slam.map_scan_count)
+        start = self._mapped_scans
+        if slam.map_scan_count > start:
+            return MapJob(False, *slam.map_scans(start), self._map_version, start, slam.map_scan_count)
+        return None
+
+    def _draw(self, job: MapJob) -> None:
+        if job.rebuild:
+            self.mapper.rebuild(job.poses, job.scans)
+        elif job.start == self._mapped_scans:  # else a save drew them meanwhile
+            self.mapper.integrate_many(job.poses, job.scans)
+        else:
+            return
+        self._map_version, self._mapped_scans = job.version, job.count
 
     async def _publish_map(self) -> None:
-        if not self._map_dirty:
+        async with self._lock:
+            job = self._map_job(full=False)
+        if job is None:
             return
-        self._map_dirty = False
-        async with self._lock:  # the scan thread updates the grid in place
+        async with self._map_lock:  # scans go on being matched while the grid is drawn
+            await self.clock.offload(self._draw, job)
             grid = await self.clock.offload(self.mapper.to_grid, self.clock.now())
         self.bus.publish(topics.MAP, grid)
 
     async def _on_save(self, req: SaveMapRequest) -> SaveMapReply:
         out = Path(req.directory) if req.directory else self.out_dir()
-        async with self._lock:
+        async with self._lock, self._map_lock:
             paths = await self.clock.offload(self._save, out, req.name)
         self.log.info("map saved", **paths)
         return SaveMapReply(paths["yaml"], paths["pgm"], paths["graph"], paths["trajectory"])
 
     def _save(self, out: Path, name: str) -> dict[str, str]:
-        self._update_map()
+        job = self._map_job(full=True)
+        if job is not None:
+            self._draw(job)
         return save_session(self.slam, out, name, self.mapper.to_grid(self.clock.now()))
 
     def out_dir(self) -> Path:

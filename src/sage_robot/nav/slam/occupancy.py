@@ -23,14 +23,42 @@ OCC_LOGODDS = 0.62  # above this (p > 0.65): occupied (100)
 FREE_LOGODDS = -1.1  # below this (p < 0.25): free (0)
 GROW_M = 10.0  # the grid grows by this much (m) on a side when a scan leaves it
 RAY_STEP_CELLS = 0.5  # samples per cell along a beam
+# A beam without a return may be open space, or a return the lidar lost: too close to read
+# (under range_min: a wall the robot brushes past), a dropout, a black or glass surface. Only
+# runs of at least OPEN_RUN_BEAMS such beams, whose neighbours on both sides returned from at
+# least OPEN_BORDER_M, clear as open space; the others clear nothing.
+OPEN_RUN_BEAMS = 3
+OPEN_BORDER_M = 0.5
+CLEAR_SIGMAS = 2.0  # a returned beam clears only up to this many range-noise sigmas short of its end
+
+
+def open_space(ranges: np.ndarray, no_return: np.ndarray) -> np.ndarray:
+    """Mask of the ``no_return`` beams that look into open space: in runs of at least
+    ``OPEN_RUN_BEAMS``, between returns (or the scan's ends) at least ``OPEN_BORDER_M`` away."""
+    n = len(no_return)
+    if n == 0 or not no_return.any():
+        return np.zeros(n, dtype=bool)
+    edges = np.diff(np.concatenate(([0], no_return.astype(np.int8), [0])))
+    starts, stops = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0]  # runs [start, stop)
+    far = np.concatenate(([True], np.nan_to_num(ranges, nan=0.0) >= OPEN_BORDER_M, [True]))
+    ok = (stops - starts >= OPEN_RUN_BEAMS) & far[starts] & far[stops + 1]
+    out = np.zeros(n, dtype=bool)
+    for a, b in zip(starts[ok], stops[ok], strict=True):
+        out[a:b] = True
+    return out
 
 
 class OccupancyMapper:
-    def __init__(self, resolution: float = 0.05, max_range: float = 30.0) -> None:
+    def __init__(
+        self, resolution: float = 0.05, max_range: float = 30.0, range_noise_fraction: float = 0.0
+    ) -> None:
         if resolution <= 0:
             raise ValueError("resolution must be > 0 m")
         self.resolution = resolution
         self.max_range = max_range
+        # The lidar's range noise as a fraction of the range (1 sigma): a return may lie that far
+        # beyond a far wall, so its beam leaves the wall's band uncleared.
+        self.range_noise_fraction = range_noise_fraction
         self.origin = np.zeros(2)
         self.logodds = np.zeros((0, 0), dtype=np.float32)
         self.seen = np.zeros((0, 0), dtype=bool)
@@ -75,7 +103,7 @@ class OccupancyMapper:
             valid = np.isfinite(r) & (r > scan.range_min)
             returned = valid & (r < min(scan.range_max, self.max_range))
             no_return = ~np.isfinite(r) | (r >= scan.range_max)
-            use = returned | no_return
+            use = returned | open_space(r, no_return)
             length = np.where(returned, r, min(scan.range_max, self.max_range))[use]
             a = scan.angles[use] + lt + pose[2]
             starts.append(np.repeat([[ox, oy]], len(a), axis=0))
@@ -105,6 +133,9 @@ class OccupancyMapper:
         # A beam's own end cell is not cleared by it; samples along a beam are in order, so
         # one update per beam and cell = drop a sample in the same cell as the one before.
         keep = flat != end_flat[beam]
+        if self.range_noise_fraction > 0:
+            clear_to = np.where(hit, length * (1.0 - CLEAR_SIGMAS * self.range_noise_fraction), length)
+            keep &= k * step < clear_to[beam]
         keep[1:] &= (flat[1:] != flat[:-1]) | (beam[1:] != beam[:-1])
         key = flat[keep]
         free = np.bincount(key, minlength=height * width)

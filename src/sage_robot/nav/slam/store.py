@@ -26,7 +26,7 @@ from sage_robot.core.msgs import OccupancyGrid
 from sage_robot.nav.slam.engine import Keyframe, Slam, SlamConfig, _TrajectoryEntry
 from sage_robot.nav.slam.matcher import MatchConfig
 from sage_robot.nav.slam.occupancy import OccupancyMapper
-from sage_robot.nav.slam.points import Scan, voxel_filter
+from sage_robot.nav.slam.points import Pose, Scan, voxel_filter
 from sage_robot.nav.slam.posegraph import Edge
 
 NAV_FREE_THRESH = 0.1  # the seed's edit to every saved map
@@ -40,10 +40,18 @@ def check_name(name: str) -> str:
     return name
 
 
-def build_map(slam: Slam, resolution: float = 0.05, stamp: float = 0.0) -> OccupancyGrid:
-    """The occupancy grid of every keyframe at its optimised pose."""
-    mapper = OccupancyMapper(resolution, slam.config.max_range_m)
-    mapper.rebuild(slam.keyframe_poses(), [kf.scan for kf in slam.keyframes])
+def mapper_for(slam: Slam, resolution: float = 0.05) -> OccupancyMapper:
+    """An empty occupancy mapper for this SLAM's lidar (its reach and range noise)."""
+    return OccupancyMapper(resolution, slam.config.max_range_m, slam.config.match.range_noise_fraction)
+
+
+def build_map(
+    slam: Slam, resolution: float = 0.05, stamp: float = 0.0, poses: list[Pose] | None = None
+) -> OccupancyGrid:
+    """The occupancy grid of the SLAM's map scans at their optimised poses (or following
+    ``poses``, one per keyframe: the optimised ones moved into another frame)."""
+    mapper = mapper_for(slam, resolution)
+    mapper.rebuild(*slam.map_scans(poses=poses))
     return mapper.to_grid(stamp)
 
 
@@ -76,10 +84,9 @@ def save_session(
 
 def _save_graph(slam: Slam, path: Path) -> None:
     kfs, edges = slam.keyframes, slam.graph.edges
-    lengths = np.array([len(kf.scan.ranges) for kf in kfs])
+    extra = [(k, off, scan) for k, kf in enumerate(kfs) for off, scan in kf.map_scans]
     cfg = asdict(slam.config)
-    np.savez_compressed(
-        path,
+    arrays: dict[str, np.ndarray] = dict(
         format=np.array(GRAPH_FORMAT),
         config=np.array(json.dumps(cfg)),
         poses=slam.graph.as_array(),
@@ -90,12 +97,40 @@ def _save_graph(slam: Slam, path: Path) -> None:
         kf_stamp=np.array([kf.stamp for kf in kfs]),
         kf_odom=np.array([kf.odom for kf in kfs], dtype=np.float64).reshape(-1, 3),
         kf_travel=np.array([kf.travel_m for kf in kfs]),
-        kf_lengths=lengths,
-        kf_ranges=np.concatenate([kf.scan.ranges for kf in kfs]).astype(np.float32),
-        kf_angles=np.concatenate([kf.scan.angles for kf in kfs]).astype(np.float32),
-        kf_limits=np.array([(kf.scan.range_min, kf.scan.range_max) for kf in kfs]),
-        kf_laser=np.array([kf.scan.laser for kf in kfs], dtype=np.float64).reshape(-1, 3),
+        **_scan_arrays("kf", [kf.scan for kf in kfs]),
+        ms_keyframe=np.array([k for k, _, _ in extra], dtype=np.int64),
+        ms_offset=np.array([off for _, off, _ in extra], dtype=np.float64).reshape(-1, 3),
+        **_scan_arrays("ms", [scan for _, _, scan in extra]),
     )
+    np.savez_compressed(path, allow_pickle=False, **arrays)
+
+
+def _scan_arrays(prefix: str, scans: list[Scan]) -> dict[str, np.ndarray]:
+    """Scans as flat arrays for ``np.savez``: ``PREFIX_lengths``, ``_ranges``, ``_angles``,
+    ``_limits`` and ``_laser``."""
+    limits = [(s.range_min, s.range_max) for s in scans]
+    return {
+        f"{prefix}_lengths": np.array([len(s.ranges) for s in scans], dtype=np.int64),
+        f"{prefix}_ranges": np.concatenate([s.ranges for s in scans] or [np.zeros(0)]).astype(np.float32),
+        f"{prefix}_angles": np.concatenate([s.angles for s in scans] or [np.zeros(0)]).astype(np.float32),
+        f"{prefix}_limits": np.array(limits, dtype=np.float64).reshape(-1, 2),
+        f"{prefix}_laser": np.array([s.laser for s in scans], dtype=np.float64).reshape(-1, 3),
+    }
+
+
+def _scans_from(data: Any, prefix: str) -> list[Scan]:
+    """The scans :func:`_scan_arrays` wrote."""
+    lengths = data[f"{prefix}_lengths"]
+    if len(lengths) == 0:
+        return []
+    splits = np.cumsum(lengths)[:-1]
+    ranges = np.split(data[f"{prefix}_ranges"], splits)
+    angles = np.split(data[f"{prefix}_angles"].astype(np.float64), splits)
+    limits, lasers = data[f"{prefix}_limits"], data[f"{prefix}_laser"]
+    return [
+        Scan(r, a, float(lim[0]), float(lim[1]), _pose(laser))
+        for r, a, lim, laser in zip(ranges, angles, limits, lasers, strict=True)
+    ]
 
 
 def load_session(path: str | Path) -> Slam:
@@ -126,12 +161,7 @@ def load_session(path: str | Path) -> Slam:
             slam.graph.edges.append(
                 Edge(int(i), int(j), (float(z[0]), float(z[1]), float(z[2])), info, str(kind))
             )
-        splits = np.cumsum(data["kf_lengths"])[:-1]
-        ranges = np.split(data["kf_ranges"], splits)
-        angles = np.split(data["kf_angles"].astype(np.float64), splits)
-        for k in range(len(poses)):
-            lo, hi = data["kf_limits"][k]
-            scan = Scan(ranges[k], angles[k], float(lo), float(hi), _pose(data["kf_laser"][k]))
+        for k, scan in enumerate(_scans_from(data, "kf")):
             pts = voxel_filter(scan.points(slam.config.max_range_m), slam.config.map_voxel_m)
             odom = _pose(data["kf_odom"][k])
             slam.keyframes.append(
@@ -144,6 +174,11 @@ def load_session(path: str | Path) -> Slam:
                 )
             )
             slam.trajectory.append(_TrajectoryEntry(float(data["kf_stamp"][k]), k, (0.0, 0.0, 0.0)))
+        if "ms_keyframe" in data:  # sessions saved before map scans have none
+            extra = zip(data["ms_keyframe"], data["ms_offset"], _scans_from(data, "ms"), strict=True)
+            for k, off, scan in extra:
+                slam.keyframes[int(k)].map_scans.append((_pose(off), scan))
+    slam.restore_map_index()
     slam.resume()
     return slam
 

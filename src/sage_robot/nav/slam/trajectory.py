@@ -24,6 +24,16 @@ class Alignment:
     scale: float  # 1.0 for a rigid alignment
     rmse_m: float  # of the aligned positions
 
+    def apply(self, pose: tuple[float, float, float]) -> tuple[float, float, float]:
+        """``pose`` (x, y m; theta rad) moved by this alignment (rotation, scale, translation)."""
+        c, s = np.cos(self.rotation_rad), np.sin(self.rotation_rad)
+        x, y, th = pose
+        return (
+            float(self.scale * (c * x - s * y) + self.translation[0]),
+            float(self.scale * (s * x + c * y) + self.translation[1]),
+            float(th + self.rotation_rad),
+        )
+
 
 def align(est: np.ndarray, true: np.ndarray, with_scale: bool = False) -> Alignment:
     """The rotation, translation (and scale) taking ``est`` (N×2 positions) closest to
