@@ -172,3 +172,53 @@ async def test_node_turns_the_odometry_with_the_gyro() -> None:
     finally:
         await node.teardown()
         await node._close()
+
+
+async def test_the_grid_is_redrawn_after_an_optimisation_at_most_every_rebuild_period() -> None:
+    """New map scans are drawn at each publish; an optimisation's redraw of every scan waits for
+    ``map_rebuild_period_s`` since the last one, except for a save; a drawing job that a save
+    overtook is dropped (no scan drawn twice)."""
+    settings = load_profile(None, {"robot": {"lidar": {"x_m": 0.0, "y_m": 0.0, "yaw_rad": 0.0}}})
+    clock = SimClock()
+    node = SlamNode(NodeContext(Bus(clock), clock, settings))
+    await node.setup()
+    period = node.config.map_rebuild_period_s
+    truth = loop_path(step_m=0.1)[:30]
+    drive = simulate(corridor_loop(), truth, yaw_drift=0.01)
+    try:
+        for k in range(15):
+            node._process(0.1 * k, drive.odom[k], drive.scans[k], False)
+        job = node._map_job(full=False)
+        assert job is not None
+        assert not job.rebuild
+        assert (job.start, job.count) == (0, node.slam.map_scan_count)
+        node._draw(job)
+        assert node._map_job(full=False) is None  # nothing new
+        node.slam.optimize()  # the graph moved: a redraw, the first one at once
+        job = node._map_job(full=False)
+        assert job is not None
+        assert job.rebuild
+        node._draw(job)
+        for k in range(15, 30):
+            node._process(0.1 * k, drive.odom[k], drive.scans[k], False)
+        node.slam.optimize()
+        await clock.step(0.5 * period)
+        job = node._map_job(full=False)  # too soon for another redraw: the new scans only
+        assert job is not None
+        assert not job.rebuild
+        assert job.start > 0
+        saved = node._map_job(full=True)  # a save redraws, whatever the period
+        assert saved is not None
+        assert saved.rebuild
+        node._draw(saved)
+        before = node.mapper.logodds.copy()
+        node._draw(job)  # overtaken: the save drew these scans already
+        assert np.array_equal(node.mapper.logodds, before)
+        await clock.step(period)
+        node.slam.optimize()
+        job = node._map_job(full=False)
+        assert job is not None
+        assert job.rebuild
+    finally:
+        await node.teardown()
+        await node._close()
