@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
 
-from sage_robot.nav.slam.engine import Slam
+from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.gyro import GyroHeading, GyroOdometry
+from sage_robot.nav.slam.posegraph import KIND_ODOM
 
 from .synth import corridor_loop, loop_path, simulate
 
@@ -111,3 +113,26 @@ def test_the_trackers_glitch_guesses_keep_the_gyros_turn(gyro: bool) -> None:
         assert turns[1:] == [pytest.approx(0.1), pytest.approx(0.1)]
     else:
         assert turns[2] == pytest.approx(0.0)  # "no motion": the wheels' turn is doubted too
+
+
+@pytest.mark.parametrize("gyro", [False, True])
+def test_keyframes_the_gyro_turned_get_the_gyros_odometry_edges(gyro: bool) -> None:
+    """An odometry edge between keyframes whose every step the gyro turned has the gyro's
+    heading noise and ``gyro_odom_sigma_xy_*`` for x and y; the wheels' edges keep theirs."""
+    truth = loop_path(step_m=0.1)[:12]
+    drive = simulate(corridor_loop(), truth)
+    cfg = dataclasses.replace(SlamConfig(), gyro_odom_sigma_xy_m=0.005, gyro_odom_sigma_xy_fraction=0.03)
+    slam = Slam(cfg, initial_pose=truth[0])
+    for k in range(len(truth)):
+        slam.add_scan(0.2 * k, drive.odom[k], drive.scans[k], gyro=gyro)
+    edges = [e for e in slam.graph.edges if e.kind == KIND_ODOM]
+    assert len(edges) >= 2
+    for e in edges[1:]:  # the first keyframe's own scan had no step before it
+        dist, turn = math.hypot(e.z[0], e.z[1]), abs(e.z[2])
+        sxy, sth = e.information[0, 0] ** -0.5, e.information[2, 2] ** -0.5
+        if gyro:
+            assert sxy == pytest.approx(0.005 + 0.03 * dist)
+            assert sth == pytest.approx(cfg.gyro_sigma_theta_rad + cfg.gyro_sigma_turn_fraction * turn)
+        else:
+            assert sxy == pytest.approx(cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist)
+            assert sth == pytest.approx(cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * turn)

@@ -68,6 +68,11 @@ class SlamConfig:
     # below: this base (rad) plus this fraction of the step's turn (the gyro's scale error).
     gyro_sigma_theta_rad: float = 0.002
     gyro_sigma_turn_fraction: float = 0.02
+    # The odometry edge's x, y noise between keyframes the gyro turned: base (m) + fraction of
+    # the distance (a calibrated odometry is good to a centimetre a metre; with the wheels'
+    # heading alone stiff edges made drives slide: docs/slam.md, "Odometry edges")
+    gyro_odom_sigma_xy_m: float = 0.05
+    gyro_odom_sigma_xy_fraction: float = 0.2
     odom_sigma_xy_m: float = 0.05  # odometry edge noise: base + fraction of the motion
     odom_sigma_theta_rad: float = 0.03
     odom_sigma_fraction: float = 0.2
@@ -315,7 +320,10 @@ class Slam:
                     self.graph.add_edge(a, node, relative(self.graph.poses[a], pose), share, KIND_SCAN)
             odo = self._odometry_step(self.keyframes[i].odom, odom)
             dist = math.hypot(odo[0], odo[1])
-            sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
+            if self._gyro_since_keyframe:
+                sxy = cfg.gyro_odom_sigma_xy_m + cfg.gyro_odom_sigma_xy_fraction * dist
+            else:
+                sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
             sth = self._heading_sigma(
                 self._gyro_since_keyframe,
                 abs(odo[2]),

@@ -3,8 +3,9 @@
 The engine's defaults (:class:`~sage_robot.nav.slam.engine.SlamConfig`) suit a survey-grade
 scanner (the SICK of the CARMEN logs). With a noisy lidar, long corridors need the fixes of
 issue #23 (``docs/slam.md``, "SLAM in simulation"): scan-to-submap edges, odometry
-calibration, oriented and smoothed map normals, local-map points two keyframes agree on,
-people's legs left out of matching, and pairings weighed by the range noise. The robot's
+calibration (and, with the gyro, odometry edges that trust it), oriented and smoothed map
+normals, local-map points two keyframes agree on, people's legs left out of matching, and
+pairings weighed by the range noise. The robot's
 ``slam`` node (``slam.range_noise_fraction`` > 0) and ``sage bench slam --sim`` both use
 :func:`noisy_lidar_config`, so the benchmark measures what the robot runs.
 """
@@ -19,6 +20,10 @@ SUBMAP_EDGE_STRIDES = (4, 8, 16, 24)  # scan-to-submap edges (see SlamConfig)
 MAP_NORMAL_NEIGHBOURS = 32  # local-map normals for a lidar with 1 % range noise
 MAP_MIN_SUPPORT = 2  # keyframes that must agree on a local-map point
 SMALL_OBJECT_M = 0.25  # foreground objects this small (legs) are not matched
+# The odometry edge between keyframes the gyro turned, once calibrated: x, y noise of this base
+# (m) + this fraction of the distance (the wheels' random noise is ~1 cm after 1 m)
+GYRO_ODOM_SIGMA_XY_M = 0.005
+GYRO_ODOM_SIGMA_XY_FRACTION = 0.03
 
 
 def noisy_lidar_config(base: SlamConfig, range_noise_fraction: float) -> SlamConfig:
@@ -30,6 +35,8 @@ def noisy_lidar_config(base: SlamConfig, range_noise_fraction: float) -> SlamCon
         base,
         submap_edge_strides=SUBMAP_EDGE_STRIDES,
         calibrate_odometry=True,
+        gyro_odom_sigma_xy_m=GYRO_ODOM_SIGMA_XY_M,
+        gyro_odom_sigma_xy_fraction=GYRO_ODOM_SIGMA_XY_FRACTION,
         oriented_normals=True,
         map_normal_neighbours=MAP_NORMAL_NEIGHBOURS,
         map_min_support=MAP_MIN_SUPPORT,
