@@ -82,3 +82,15 @@ def test_a_far_noisy_wall_stays_a_wall_when_the_range_noise_is_known() -> None:
         found[fraction] = wall_found(mapper, x, 1.5, 0.1)
     assert found[0.01] > 0.93, found
     assert found[0.0] < found[0.01], found  # beams ending behind the wall cleared it
+
+
+def test_too_close_and_error_readings_never_clear() -> None:
+    """REP 117: -inf is a detection too close to measure and NaN an error; neither is open space."""
+    for bad in (-np.inf, np.nan):
+        mapper = OccupancyMapper(0.05, RANGE_MAX_M)
+        mapper.integrate_many([(0.0, 0.0, 0.0)] * 3, [wall_scan(0.0)] * 3)
+        ranges = np.full(BEAMS, bad, dtype=np.float32)
+        blind = Scan(ranges, ANGLES, RANGE_MIN_M, RANGE_MAX_M, (0.0, 0.0, 0.0))
+        for _ in range(10):
+            mapper.integrate((WALL_X_M - 1.0, 0.0, 0.0), blind)
+        assert wall_found(mapper, 0.0, 1.0, 0.0) == 1.0

@@ -102,7 +102,8 @@ class OccupancyMapper:
             r = np.asarray(scan.ranges, dtype=np.float64)
             valid = np.isfinite(r) & (r > scan.range_min)
             returned = valid & (r < min(scan.range_max, self.max_range))
-            no_return = ~np.isfinite(r) | (r >= scan.range_max)
+            # +inf or at range_max: nothing came back (REP 117: -inf is "too close", NaN an error)
+            no_return = np.isposinf(r) | (np.isfinite(r) & (r >= scan.range_max))
             use = returned | open_space(r, no_return)
             length = np.where(returned, r, min(scan.range_max, self.max_range))[use]
             a = scan.angles[use] + lt + pose[2]
@@ -110,6 +111,8 @@ class OccupancyMapper:
             ends.append(np.column_stack((ox + length * np.cos(a), oy + length * np.sin(a))))
             hit.append(returned[use])
         p0, p1, h = np.concatenate(starts), np.concatenate(ends), np.concatenate(hit)
+        if len(p0) == 0:  # not one beam to draw (all too close, errors or lost)
+            return
         self._ensure(np.minimum(p0.min(axis=0), p1.min(axis=0)), np.maximum(p0.max(axis=0), p1.max(axis=0)))
         self._cast(p0, p1, h)
 
