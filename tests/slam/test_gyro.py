@@ -5,11 +5,16 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
 import pytest
 
+from sage_robot.core.geometry import compose, relative
+from sage_robot.nav.slam import engine
 from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.gyro import GyroHeading, GyroOdometry
+from sage_robot.nav.slam.points import Scan
 from sage_robot.nav.slam.posegraph import KIND_ODOM
+from sage_robot.nav.slam.trajectory import align
 
 from .synth import corridor_loop, loop_path, simulate
 
@@ -136,3 +141,45 @@ def test_keyframes_the_gyro_turned_get_the_gyros_odometry_edges(gyro: bool) -> N
         else:
             assert sxy == pytest.approx(cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist)
             assert sth == pytest.approx(cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * turn)
+
+
+Pose = tuple[float, float, float]
+SLIP_STEP = 200  # the scan whose odometry step slipped (20 m into the lap)
+
+
+def _slipping_drive(slip_m: float) -> tuple[list[Pose], list[Pose], list[Scan]]:
+    """A lap of the drawn corridor with the gyro's heading; the wheels read ``slip_m`` too far
+    on one step (they spun on a threshold)."""
+    truth = loop_path(step_m=0.1)
+    drive = simulate(corridor_loop(), truth, yaw_drift=0.0)
+    rng = np.random.default_rng(0)
+    odom = [truth[0]]
+    for k in range(1, len(truth)):
+        dx, dy, dth = relative(truth[k - 1], truth[k])
+        slip = slip_m if k == SLIP_STEP else 0.0
+        odom.append(compose(odom[-1], (dx + rng.normal(0, 0.002) + slip, dy + rng.normal(0, 0.002), dth)))
+    return truth, odom, drive.scans
+
+
+@pytest.mark.parametrize("gate", [True, False])
+def test_a_wheel_slip_does_not_bend_the_map_through_a_stiff_odometry_edge(
+    gate: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Odometry edges the gyro turned are stiff (5 mm + 3 %); when the wheels slip 0.3 m, the
+    scan match disagrees by far more than the edge's noise and the edge falls back to the
+    wheels' weak noise, so the loop's map keeps its shape (without that gate, it bends)."""
+    if not gate:
+        monkeypatch.setattr(engine, "SLIP_SIGMAS", math.inf)
+    truth, odom, scans = _slipping_drive(0.3)
+    cfg = dataclasses.replace(SlamConfig(), gyro_odom_sigma_xy_m=0.005, gyro_odom_sigma_xy_fraction=0.03)
+    slam = Slam(cfg, initial_pose=truth[0])
+    for k in range(len(truth)):
+        slam.add_scan(0.2 * k, odom[k], scans[k], gyro=True)
+    assert slam.loop_closures > 5
+    _, est = slam.trajectory_array()
+    error = align(est[:, :2], np.asarray(truth)[:, :2]).rmse_m
+    if gate:
+        assert slam.odometry_slips == 1
+        assert error < 0.01  # as without a slip (0.0065 m)
+    else:
+        assert error > 0.015  # 0.022 m: the slip's edge pulled the keyframes after it along

@@ -37,6 +37,9 @@ MIN_SCAN_POINTS = 20  # a scan with fewer hits is dead-reckoned
 DOUBTFUL_INLIERS = 0.6  # a match this poor makes the tracker try other motion guesses
 SEARCH_PRIOR_SCALE = 2.0  # the correlative search's prior is this much wider than ICP's
 GLITCH_MARGIN = 0.05  # another guess must match this much better (inlier fraction) to win
+# A gyro-turned odometry edge whose x, y step disagrees with the scan-matched one by more than
+# this many of its sigmas is a wheel slip: the edge falls back to the wheels' weak noise
+SLIP_SIGMAS = 10.0
 
 
 @dataclass(frozen=True)
@@ -162,6 +165,7 @@ class Slam:
         self.last_score = 0.0
         self.loop_attempts = 0
         self.loops_rejected = 0  # matched, but the optimised graph disagreed with them
+        self.odometry_slips = 0  # gyro-turned odometry edges weakened: the wheels slipped
         self._kf_pose_before: Pose = initial_pose
         self.optimizations = 0
         self.map_version = 0  # bumps when keyframe poses change (after an optimisation)
@@ -320,10 +324,13 @@ class Slam:
                     self.graph.add_edge(a, node, relative(self.graph.poses[a], pose), share, KIND_SCAN)
             odo = self._odometry_step(self.keyframes[i].odom, odom)
             dist = math.hypot(odo[0], odo[1])
+            sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
             if self._gyro_since_keyframe:
-                sxy = cfg.gyro_odom_sigma_xy_m + cfg.gyro_odom_sigma_xy_fraction * dist
-            else:
-                sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
+                stiff = cfg.gyro_odom_sigma_xy_m + cfg.gyro_odom_sigma_xy_fraction * dist
+                if info is None or math.hypot(odo[0] - z[0], odo[1] - z[1]) <= SLIP_SIGMAS * stiff:
+                    sxy = stiff
+                else:
+                    self.odometry_slips += 1
             sth = self._heading_sigma(
                 self._gyro_since_keyframe,
                 abs(odo[2]),

@@ -202,6 +202,7 @@ class SlamNode(Node):
             "gyro_scans": self.gyro_scans,
             "keyframes": len(self.slam.keyframes),
             "loop_closures": self.slam.loop_closures,
+            "odometry_slips": self.slam.odometry_slips,
             "score": round(self.slam.last_score, 3),
         }
 

@@ -118,8 +118,9 @@ def _stats(values: np.ndarray, scale: float = 1.0) -> dict[str, float]:
 
 def quality_report(slam: Slam) -> dict[str, Any]:
     """How good the optimised pose graph is: keyframes, distance driven, loop closures (accepted,
-    tried, rejected) and, per edge kind (odom / scan / loop), the count, the Mahalanobis error
-    (``chi``) and the metric residuals (``residual_m``, ``residual_deg``: mean and max)."""
+    tried, rejected), gyro-turned odometry edges weakened for a wheel slip and, per edge kind
+    (odom / scan / loop), the count, the Mahalanobis error (``chi``) and the metric residuals
+    (``residual_m``, ``residual_deg``: mean and max)."""
     graph = slam.graph
     chi = graph.edge_errors()
     trans, rot = edge_residuals(graph)
@@ -142,6 +143,7 @@ def quality_report(slam: Slam) -> dict[str, Any]:
         "loop_attempts": slam.loop_attempts,
         "loops_rejected": slam.loops_rejected,
         "optimizations": slam.optimizations,
+        "odometry_slips": slam.odometry_slips,
         "edges": edges,
     }
 
