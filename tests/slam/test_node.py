@@ -69,8 +69,10 @@ async def test_node_maps_publishes_and_saves(tmp_path: Path) -> None:
         assert (grid.data == 0).sum() > 2000
         assert bus.latest(topics.MAP) is grid  # latched for late subscribers
 
+        assert node.slam.pending_keyframes > 0  # the keyframes since the last loop closure...
         reply = await bus.call(SLAM_SAVE, SaveMapRequest("demand", str(tmp_path / "other")), timeout=WAIT_S)
         assert isinstance(reply, SaveMapReply)
+        assert node.slam.pending_keyframes == 0  # ...are optimised with the rest before saving
         assert files_exist(reply.graph)
         saved = read_map(reply.yaml)
         assert (saved.data == 100).sum() > 500

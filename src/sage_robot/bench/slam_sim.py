@@ -129,6 +129,7 @@ def run_check(
         ranges = world.ranges(k)
         scan = Scan(ranges, angles, sp.range_min_m, sp.range_max_m, world.laser)
         slam.add_scan(k * SCAN_PERIOD_S, odom, scan, gyro=turned)
+    slam.finish()  # as the robot's slam node does when it saves the map
     cpu_s = time.process_time() - t0
     _, est = slam.trajectory_array()
     true_xy = np.asarray(truth)[:, :2]

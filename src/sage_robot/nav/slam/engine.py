@@ -40,6 +40,7 @@ GLITCH_MARGIN = 0.05  # another guess must match this much better (inlier fracti
 # A gyro-turned odometry edge whose x, y step disagrees with the scan-matched one by more than
 # this many of its sigmas is a wheel slip: the edge falls back to the wheels' weak noise
 SLIP_SIGMAS = 10.0
+MIN_TRAVEL_M = 0.05  # a submap edge shorter than this keeps its information along the travel
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,10 @@ class SlamConfig:
     local_keyframes: int = 25  # keyframes in the local map
     # The scan was matched against the whole local map, so its match can also tie the new
     # keyframe to these older keyframes of that map (counted back from the previous one):
-    # an odometry bias then cannot bend the chain one small step at a time. The corridor
+    # an odometry bias then cannot bend the chain one small step at a time. Such an edge holds
+    # the chain straight (across the travel and in heading) but says nothing about its length:
+    # the older keyframe was placed by the same tracker, so the edge's travel would only repeat
+    # the chain's own drift (docs/slam.md, "Submap edges hold the chain straight"). The corridor
     # fixes below (issue #23) are off by default: on the MIT CSAIL log, all of them together
     # took the relation error from 0.027 to 0.087 m (26 loops closed instead of 74); the
     # simulation bench turns them on (bench/slam_sim.slam_config).
@@ -113,6 +117,17 @@ class SlamConfig:
 
     def __post_init__(self) -> None:  # a saved session's JSON gives lists back
         object.__setattr__(self, "submap_edge_strides", tuple(self.submap_edge_strides))
+
+
+def _across_travel(info: np.ndarray, z: Pose) -> np.ndarray:
+    """``info`` (x, y, theta) without its information along the translation of ``z``."""
+    dist = math.hypot(z[0], z[1])
+    if dist < MIN_TRAVEL_M:  # a turn on the spot: no direction of travel
+        return info
+    u = np.array([z[0] / dist, z[1] / dist, 0.0])
+    p = np.eye(3) - np.outer(u, u)
+    out: np.ndarray = p @ info @ p
+    return out
 
 
 @dataclass
@@ -177,6 +192,7 @@ class Slam:
         self._gyro_since_keyframe = False  # every step since the last keyframe was
         self._local: PointMap | None = None
         self._since_loop_try = 0
+        self._since_optimization = 0  # keyframes added since the graph was last optimised
         self.odometry_calibration = OdometryCalibration()
         # the occupancy grid's scans in the order they came: (keyframe, -1 for its own scan
         # or the index into its map_scans)
@@ -235,6 +251,7 @@ class Slam:
         info = match.information if match is not None and score > 0 else None
         self._add_keyframe(stamp, odom, scan, pose, info)
         self.trajectory.append(_TrajectoryEntry(stamp, len(self.keyframes) - 1, (0.0, 0.0, 0.0)))
+        self._since_optimization += 1
         closed = self._try_loop_closure()
         return StepResult(self.pose, score, inliers, True, closed)
 
@@ -321,7 +338,8 @@ class Slam:
                 self.graph.edges[-1].information = share
                 for back in backs:  # scan-to-submap: stiffen the chain
                     a = node - 1 - back
-                    self.graph.add_edge(a, node, relative(self.graph.poses[a], pose), share, KIND_SCAN)
+                    za = relative(self.graph.poses[a], pose)
+                    self.graph.add_edge(a, node, za, _across_travel(share, za), KIND_SCAN)
             odo = self._odometry_step(self.keyframes[i].odom, odom)
             dist = math.hypot(odo[0], odo[1])
             sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
@@ -440,11 +458,22 @@ class Slam:
         self._after_optimization(offset)
         return stats
 
+    @property
+    def pending_keyframes(self) -> int:
+        """Keyframes added since the graph was last optimised: only the tracker placed them."""
+        return self._since_optimization
+
+    def finish(self) -> None:
+        """The drive is over (the map is saved): optimise the pending keyframes with the rest."""
+        if self._since_optimization > 0 and len(self.keyframes) > 1:
+            self.optimize()
+
     def _after_optimization(self, offset: Pose | None = None) -> None:
         k = len(self.keyframes) - 1
         if offset is None:
             offset = relative(self._kf_pose_before, self.pose)
         self.optimizations += 1
+        self._since_optimization = 0
         self.map_version += 1
         self.pose = compose(self.graph.poses[k], offset)
         self._rebuild_local()

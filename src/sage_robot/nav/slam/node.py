@@ -188,6 +188,7 @@ class SlamNode(Node):
         return SaveMapReply(paths["yaml"], paths["pgm"], paths["graph"], paths["trajectory"])
 
     def _save(self, out: Path, name: str) -> dict[str, str]:
+        self.slam.finish()  # the keyframes since the last loop closure, optimised with the rest
         job = self._map_job(full=True)
         if job is not None:
             self._draw(job)

@@ -73,6 +73,7 @@ def replay_log(
         slam.add_scan(s.stamp, odom, to_scan(s))
         if progress:
             it.set_postfix(kf=len(slam.keyframes), loops=slam.loop_closures, refresh=False)  # type: ignore[attr-defined]
+    slam.finish()
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     used = CarmenLog(log.path, scans, log.odoms, log.params)
     return ReplayResult(slam, used, seconds, cpu)
