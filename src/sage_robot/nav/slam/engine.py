@@ -332,10 +332,12 @@ class Slam:
             i = node - 1
             z = relative(self.graph.poses[i], pose)
             if info is not None:
-                self.graph.add_edge(i, node, z, info, KIND_SCAN)
                 backs = [b for b in cfg.submap_edge_strides if b < min(node, cfg.local_keyframes)]
                 share = info / (1 + len(backs))  # one match: its information split over its edges
-                self.graph.edges[-1].information = share
+                # The match's information is about the map-frame x, y; the graph measures an
+                # edge's error in the frame of its second pose. Turned into that frame (here and
+                # for loop edges) it measured worse: docs/slam.md, "The matches' information".
+                self.graph.add_edge(i, node, z, share, KIND_SCAN)
                 for back in backs:  # scan-to-submap: stiffen the chain
                     a = node - 1 - back
                     za = relative(self.graph.poses[a], pose)
