@@ -33,6 +33,7 @@ from tests.support.waits import until
 
 CLOCK_SLACK_S = 1.0  # simulated s: /clock messages in flight to the supervisor
 START_S = 90.0  # bound on a group coming up (imports and Zenoh on a loaded 2-core machine)
+ZENOH_RAISED_S = 10.0  # bound on Zenoh threads started late being raised (ZENOH_RERAISE_S: 1 s)
 
 # Packages the motion process must never import (models, speech, ML runtimes).
 ML_PACKAGES = {"torch", "onnxruntime", "transformers", "sentence_transformers", "faster_whisper",
@@ -184,12 +185,15 @@ async def _crash_and_recover(sup: GroupSupervisor, odom: list[Odometry], events:
     # processes.realtime: motion at SCHED_FIFO 40 where the machine allows it (else it says why)
     assert realtime.describe(pids["motion"]) == ("SCHED_FIFO 40" if fifo_permitted() else "normal")
     assert realtime.describe(pids["aux"]) == "normal"
-    # processes.zenoh_realtime: every group's Zenoh threads at SCHED_FIFO 10, motion's kept at 40
-    zenoh_fifo = {g: _zenoh_threads(pid) for g, pid in pids.items()}
+    # processes.zenoh_realtime: every group's Zenoh threads at SCHED_FIFO 10, motion's kept at 40,
+    # also those Zenoh starts later (raised within ZENOH_RERAISE_S: one was once seen at normal)
     if fifo_permitted():
-        assert zenoh_fifo == {"sim": {"SCHED_FIFO 10"}, "motion": {"SCHED_FIFO 40"}, "aux": {"SCHED_FIFO 10"}}
+        want = {"sim": {"SCHED_FIFO 10"}, "motion": {"SCHED_FIFO 40"}, "aux": {"SCHED_FIFO 10"}}
     else:
-        assert zenoh_fifo == {"sim": {"normal"}, "motion": {"normal"}, "aux": {"normal"}}
+        want = {"sim": {"normal"}, "motion": {"normal"}, "aux": {"normal"}}
+    await until(lambda: {g: _zenoh_threads(pid) for g, pid in pids.items()} == want,
+                "every group's Zenoh threads at their priority", ZENOH_RAISED_S,
+                detail=lambda: {g: _zenoh_threads(pid) for g, pid in pids.items()})
     os.kill(pids["aux"], signal.SIGKILL)
     t0 = time.monotonic()
     await until(lambda: g["aux"].state is NodeState.RUNNING and g["aux"].pid != pids["aux"], "aux back",

@@ -32,6 +32,7 @@ import contextlib
 import json
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -52,6 +53,8 @@ from sage_robot.core.node import SIM_STEP_HOOKS, NodeContext
 from sage_robot.core.realtime import raise_threads, set_fifo
 from sage_robot.core.transport.keys import ZENOH_THREADS
 from sage_robot.hardware.mcu.bridge import PORT_READ_ELSEWHERE, PORT_RESOURCE
+
+ZENOH_RERAISE_S = 1.0  # how often Zenoh threads started since are raised to their priority
 
 GROUP_HEALTH_PREFIX = "/sage/group_health/"  # + group name: a group's launcher reports here
 PORT_WATCH_S = 0.1  # how often the simulator's group checks its pty link (s, its clock)
@@ -234,13 +237,25 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def raise_zenoh_threads(group: str, priority: int) -> None:
-    """Zenoh's network threads (started with the bus's session) at ``processes.zenoh_realtime``."""
+    """Zenoh's network threads (started with the bus's session) at ``processes.zenoh_realtime``,
+    and those it starts later too: a pool thread started from a thread at the normal priority
+    (a Python thread calling into Zenoh) does not inherit it, so a watcher thread raises them
+    every ``ZENOH_RERAISE_S`` (wall clock) for the life of the process."""
     if not priority:
         return
     _raised, refused = raise_threads(priority, ZENOH_THREADS)
     if refused:  # the robot runs on; messages may wait for a time slice
         print(f"sage group {group}: Zenoh threads: {refused}; they run at the normal priority",
               file=sys.stderr)
+        return
+
+    def watch() -> None:
+        while True:
+            time.sleep(ZENOH_RERAISE_S)
+            if raise_threads(priority, ZENOH_THREADS)[1]:  # refused now: nothing more to do
+                return
+
+    threading.Thread(target=watch, name="sage-zenoh-prio", daemon=True).start()
 
 
 def main(argv: list[str] | None = None) -> int:
