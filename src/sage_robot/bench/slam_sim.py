@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -86,7 +87,20 @@ def slam_config(spec: Any) -> Any:
     return noisy_lidar_config(SlamConfig(max_range_m=spec.range_max_m), spec.noise_fraction)
 
 
-def run_check(
+@dataclass
+class Drive:
+    """A mapped drive: the SLAM that mapped it, the true poses of its scans and its world."""
+
+    slam: Any  # sage_robot.nav.slam.engine.Slam
+    truth: list[Pose]
+    world: Any  # sage_robot.bench.slam_world.SimDrive
+    path: Path
+    route: str
+    gyro: bool
+    cpu_s: float
+
+
+def map_drive(
     max_length_m: float | None = None,
     seed: int = 0,
     map_path: str | Path | None = None,
@@ -94,18 +108,17 @@ def run_check(
     people: bool = True,
     clutter: bool = True,
     gyro: bool = False,
-) -> dict[str, Any]:
-    """Drive, map and score; ``route`` defaults to ``corridor`` on the shipped map, else ``auto``;
-    ``gyro``: the odometry turns with the robot's gyro (``sage bench slam --sim --imu``)."""
+    config: Any = None,
+) -> Drive:
+    """Drive the simulated robot through the map and map it (``config``: the SLAM settings,
+    :func:`slam_config`'s by default); ``route`` defaults to ``corridor`` on the shipped map,
+    else ``auto``; ``gyro``: the odometry turns with the robot's gyro."""
     from sage_robot.bench.slam_world import SCAN_PERIOD_S, SimDrive
     from sage_robot.core.errors import ConfigError
     from sage_robot.core.mapio import read_map
     from sage_robot.nav.slam.engine import Slam
     from sage_robot.nav.slam.gyro import GyroOdometry
-    from sage_robot.nav.slam.mapscore import score_map
     from sage_robot.nav.slam.points import Scan
-    from sage_robot.nav.slam.store import build_map
-    from sage_robot.nav.slam.trajectory import align
 
     path = Path(map_path) if map_path is not None else shipped_map()
     if not path.is_file():
@@ -120,7 +133,7 @@ def run_check(
     world = SimDrive(truth_grid, truth, seed, people=people, clutter=clutter, gyro=gyro)
     sp = world.spec
     angles = sp.angles()
-    slam = Slam(slam_config(sp), initial_pose=truth[0])
+    slam = Slam(config if config is not None else slam_config(sp), initial_pose=truth[0])
     fuse = GyroOdometry()
     t0 = time.process_time()
     for k in range(len(truth)):
@@ -130,7 +143,27 @@ def run_check(
         scan = Scan(ranges, angles, sp.range_min_m, sp.range_max_m, world.laser)
         slam.add_scan(k * SCAN_PERIOD_S, odom, scan, gyro=turned)
     slam.finish()  # as the robot's slam node does when it saves the map
-    cpu_s = time.process_time() - t0
+    return Drive(slam, truth, world, path, route, gyro, time.process_time() - t0)
+
+
+def run_check(
+    max_length_m: float | None = None,
+    seed: int = 0,
+    map_path: str | Path | None = None,
+    route: str | None = None,
+    people: bool = True,
+    clutter: bool = True,
+    gyro: bool = False,
+) -> dict[str, Any]:
+    """Drive, map and score (:func:`map_drive`; ``sage bench slam --sim [--imu]``)."""
+    from sage_robot.bench.slam_world import SCAN_PERIOD_S
+    from sage_robot.nav.slam.mapscore import score_map
+    from sage_robot.nav.slam.store import build_map
+    from sage_robot.nav.slam.trajectory import align
+
+    drive = map_drive(max_length_m, seed, map_path, route, people, clutter, gyro)
+    slam, truth, world, path, route = drive.slam, drive.truth, drive.world, drive.path, drive.route
+    cpu_s = drive.cpu_s
     _, est = slam.trajectory_array()
     true_xy = np.asarray(truth)[:, :2]
     err = np.hypot(*(est[:, :2] - true_xy).T)

@@ -31,7 +31,7 @@ from sage_robot.nav.slam.dynamic import small_foreground, supported
 from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap, smooth_normals
 from sage_robot.nav.slam.odomcal import OdometryCalibration
 from sage_robot.nav.slam.points import Pose, Scan, normals, rotate, transform, voxel_filter, voxel_indices
-from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, PoseGraph
+from sage_robot.nav.slam.posegraph import KIND_LOOP, KIND_ODOM, KIND_SCAN, Edge, PoseGraph
 
 MIN_SCAN_POINTS = 20  # a scan with fewer hits is dead-reckoned
 DOUBTFUL_INLIERS = 0.6  # a match this poor makes the tracker try other motion guesses
@@ -194,6 +194,9 @@ class Slam:
         self._since_loop_try = 0
         self._since_optimization = 0  # keyframes added since the graph was last optimised
         self.odometry_calibration = OdometryCalibration()
+        # gyro-turned odometry edges and their raw steps: each optimisation measures them again
+        # with the calibration learnt so far (calibrate_odometry)
+        self._odometry_edges: list[tuple[Edge, Pose]] = []
         # the occupancy grid's scans in the order they came: (keyframe, -1 for its own scan
         # or the index into its map_scans)
         self._map_index: list[tuple[int, int]] = []
@@ -357,6 +360,8 @@ class Slam:
                 cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * abs(odo[2]),
             )
             self.graph.add_edge(i, node, odo, np.diag([sxy**-2, sxy**-2, sth**-2]), KIND_ODOM)
+            if cfg.calibrate_odometry and self._gyro_since_keyframe:
+                self._odometry_edges.append((self.graph.edges[-1], relative(self.keyframes[i].odom, odom)))
         self._gyro_since_keyframe = True
         self._rebuild_local()
 
@@ -443,6 +448,7 @@ class Slam:
         backup = list(self.graph.poses)
         self._kf_pose_before = backup[k]
         self.graph.add_edge(j, k, z, match.information * cfg.loop_information_scale, KIND_LOOP)
+        self._recalibrate_odometry_edges()
         self.graph.optimize()
         if self.graph.edge_errors()[-1] > cfg.loop_max_chi:  # the rest of the graph disagrees
             self.graph.edges.pop()
@@ -456,9 +462,19 @@ class Slam:
         """Optimise the pose graph and move the local map and current pose with it."""
         k = len(self.keyframes) - 1
         offset = relative(self.graph.poses[k], self.pose)
+        self._recalibrate_odometry_edges()
         stats = self.graph.optimize()
         self._after_optimization(offset)
         return stats
+
+    def _recalibrate_odometry_edges(self) -> None:
+        """Measure the gyro-turned odometry edges again with the calibration learnt so far:
+        the first metres were driven before it was known (2 % of scale is 16 cm over 8 m),
+        and the estimate gets better as the drive goes on. Wheel-turned edges keep the
+        calibration of their time: measured again (in heading, or only in travel), wheels-only
+        drives slid (docs/slam.md, "Odometry edges measured again")."""
+        for edge, raw in self._odometry_edges:
+            edge.z = self.odometry_calibration.correct(raw)
 
     @property
     def pending_keyframes(self) -> int:

@@ -31,6 +31,10 @@ from sage_robot.core.geometry import relative
 Pose = tuple[float, float, float]
 
 BASELINE_M = 2.0  # a calibration stretch is at least this long (m of odometry)
+# ...and at most this long: a longer one crossed ground the scans did not pin down (a bare
+# corridor between two door frames), where the tracker followed the odometry it is compared
+# with (on the bench's corridor drive such stretches read 0.3-1.1 % short against the truth)
+MAX_STRETCH_M = 3.0
 MAX_STRETCH_TURN_RAD = 0.3  # ...and turns less than this (a turn's own scale error stays out)
 MIN_ISOTROPY = 0.25  # information along the travel / strongest direction, at both ends...
 MIN_ALONG_INFO = 25.0  # ...or at least this along the travel (1/m² per unit of one scan: with a
@@ -102,7 +106,7 @@ class OdometryCalibration:
             return
         d_est = relative(self._anchor.pose, pose)
         self._anchor = _Anchor(pose, odom)
-        if abs(d_odom[2]) > MAX_STRETCH_TURN_RAD:
+        if abs(d_odom[2]) > MAX_STRETCH_TURN_RAD or dist > MAX_STRETCH_M:
             return
         keep = math.exp(-dist / MEMORY_M)
         self._sum_est = keep * self._sum_est + math.hypot(d_est[0], d_est[1])
