@@ -9,9 +9,9 @@ per metre, both as decaying weighted means, and corrects odometry steps with the
 
 A stretch counts when both of its ends were matched with the information along the direction
 of travel at least ``MIN_ISOTROPY`` of the strongest direction's (or ``MIN_ALONG_INFO``), and it
-is at least
-``BASELINE_M`` long (the matcher's centimetre noise then weighs little). Poses (x, y m;
-theta rad).
+is at least ``BASELINE_M`` long (the matcher's centimetre noise then weighs little) and at
+most ``MAX_STRETCH_M`` (a longer one crossed ground the scans did not pin down, where the
+tracker followed the very odometry it is compared with). Poses (x, y m; theta rad).
 
 The turns' scale too (the wheels' track width, a gyro's sensitivity: both read a turn a
 percent or two off): the matched turn over the odometry's, from turns of at least
