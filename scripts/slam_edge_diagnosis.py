@@ -36,8 +36,8 @@ import numpy as np
 
 from sage_robot.bench.slam_sim import map_drive, slam_config
 from sage_robot.bench.slam_world import SCAN_PERIOD_S
+from sage_robot.core.errors import SageError
 from sage_robot.core.geometry import compose, relative
-from sage_robot.core.mapio import read_map
 from sage_robot.nav.slam.engine import MIN_TRAVEL_M, Slam
 from sage_robot.nav.slam.posegraph import KIND_LOOP, Edge, PoseGraph
 from sage_robot.nav.slam.trajectory import align
@@ -235,15 +235,16 @@ def main() -> None:
     ap.add_argument("--segment", type=int, default=0, help="error per this many keyframes")
     ap.add_argument("--set", default="{}", help="SlamConfig fields to change (JSON; 'match': {...})")
     args = ap.parse_args()
-    over = json.loads(args.set)
-    from sage_robot.bench.slam_sim import shipped_map
     from sage_robot.sim.lidar import LidarSpec
 
-    read_map(args.map or shipped_map())  # a bad map fails here, before the drive
-    base = slam_config(LidarSpec())
-    match = dataclasses.replace(base.match, **over.pop("match", {}))
-    cfg = dataclasses.replace(base, **over, match=match)
-    drive = map_drive(args.sim_length, args.seed, args.map, args.route, gyro=args.imu, config=cfg)
+    try:
+        over = json.loads(args.set)
+        base = slam_config(LidarSpec())
+        match = dataclasses.replace(base.match, **over.pop("match", {}))
+        cfg = dataclasses.replace(base, **over, match=match)
+        drive = map_drive(args.sim_length, args.seed, args.map, args.route, gyro=args.imu, config=cfg)
+    except (SageError, json.JSONDecodeError, TypeError) as exc:  # a bad map, route or --set
+        raise SystemExit(f"slam_edge_diagnosis: {exc}") from None
     slam, truth = drive.slam, drive.truth
     truth_kf = [truth[round(kf.stamp / SCAN_PERIOD_S)] for kf in slam.keyframes]
     report: dict[str, Any] = {
