@@ -3,26 +3,18 @@ swaps in are the ones the pose graph sees."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 
 from sage_robot.core.geometry import relative
 from sage_robot.nav.slam.posegraph import KIND_SCAN, PoseGraph
-
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "slam_edge_diagnosis.py"
+from tests.slam.scripts import load_script
 
 
 def load() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("slam_edge_diagnosis", SCRIPT)
-    assert spec is not None
-    assert spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("slam_edge_diagnosis")
 
 
 def test_the_error_is_the_one_the_graph_weighs() -> None:
