@@ -39,7 +39,7 @@ from sage_robot.bench.slam_world import SCAN_PERIOD_S
 from sage_robot.core.errors import SageError
 from sage_robot.core.geometry import relative
 from sage_robot.nav.slam.engine import MIN_SCAN_POINTS, Keyframe, Slam
-from sage_robot.nav.slam.matcher import PointMap, smooth_normals
+from sage_robot.nav.slam.matcher import Match, PointMap, smooth_normals
 from sage_robot.nav.slam.points import Pose, Scan, transform, voxel_filter
 
 MIN_STEP_M = 0.05  # keyframes closer than this to the previous one have no direction of travel
@@ -83,23 +83,24 @@ def local_map(slam: Slam, indices: range, equal_weights: bool) -> PointMap | Non
         pm.normals = smooth_normals(pts, pm.tree, nrm, cfg.map_normal_neighbours, cfg.map_normal_radius_m)
     if equal_weights:  # the gates still widen with the range; every pairing weighs 1
         gates = pm._gates
-        pm._gates = lambda q, v, g: (gates(q, v, g)[0], np.ones(len(q)))  # type: ignore[method-assign]
+        pm._gates = lambda q, v, g, equal=False: (gates(q, v, g)[0], np.ones(len(q)))  # type: ignore[method-assign]
     return pm
 
 
 def contributions(
     pm: PointMap,
     q: np.ndarray,
-    x: Pose,
+    match: Match,
     true: Pose,
     view: tuple[float, float],
     u: np.ndarray,
     prior_info: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per paired scan point (paired as at the match ``x``): its share of the along-travel
-    error (m) of a Gauss-Newton step from the true pose, its range and its offset across."""
+    """Per paired scan point (paired and weighed as in the ``match``): its share of the
+    along-travel error (m) of a Gauss-Newton step from the true pose, its range and its offset
+    across."""
     cfg = pm.config
-    _, ok, j, w = pm._associate(np.array(x), q, view, cfg.icp_stages_m[-1])
+    _, ok, j, w = pm._associate(np.array(match.pose), q, view, cfg.icp_stages_m[-1], match.equal_weights)
     c, s = math.cos(true[2]), math.sin(true[2])
     qk, n = q[ok], pm.normals[j[ok]]
     r = np.einsum("ij,ij->i", n, transform(true, qk) - pm.points[j[ok]])
@@ -143,6 +144,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
     n_local = cfg.local_keyframes
     prior_info = np.diag([args.prior_sigma**-2, args.prior_sigma**-2, args.heading_sigma**-2])
     along, steps, shares, ranges, acrosses = [], [], [], [], []
+    equal = 0  # matches refined with equal weights (MatchConfig.equal_weights_isotropy)
     for k in range(n_local, len(truth) - (n_local if args.backward else 0)):
         step = relative(truth[k - 1], truth[k])
         dist = math.hypot(step[0], step[1])
@@ -158,8 +160,9 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         heading = math.atan2(truth[k][1] - truth[k - 1][1], truth[k][0] - truth[k - 1][0])
         u = np.array([math.cos(heading), math.sin(heading)])
         along.append(float((np.array(match.pose[:2]) - np.array(truth[k][:2])) @ u))
+        equal += match.equal_weights
         steps.append(dist)
-        share, rng, across = contributions(pm, q, match.pose, truth[k], view, u, prior_info)
+        share, rng, across = contributions(pm, q, match, truth[k], view, u, prior_info)
         shares.append(share)
         ranges.append(rng)
         acrosses.append(across)
@@ -174,6 +177,7 @@ def measure(args: argparse.Namespace) -> dict[str, Any]:
         "backward": args.backward,
         "rerender_noise": args.rerender,
         "equal_weights": args.equal_weights,
+        "equal_weight_matches": equal,
         "along_bias_mm": round(1000 * float(err.mean()), 3),
         "along_sd_mm": round(1000 * float(err.std()), 2),
         "drift_pct": round(100 * float(err.sum() / np.sum(steps)), 3),

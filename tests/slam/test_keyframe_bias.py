@@ -4,6 +4,8 @@ adds up to the error the matcher made, and a drive too short to measure is a cle
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -31,8 +33,9 @@ def args(**over: object) -> argparse.Namespace:
     return argparse.Namespace(**{**base, **over})
 
 
-def test_the_split_adds_up_to_the_matchers_error() -> None:
-    out = load().measure(args())
+@pytest.mark.parametrize("equal_weights", [False, True])
+def test_the_split_adds_up_to_the_matchers_error(equal_weights: bool) -> None:
+    out = load().measure(args(equal_weights=equal_weights))
     assert out["keyframes"] >= 20
     # one Gauss-Newton step from the truth with the match's pairings: within 0.1 mm of the match
     assert out["linear_sum_mm"] == pytest.approx(out["along_bias_mm"], abs=0.1)
@@ -42,6 +45,16 @@ def test_the_split_adds_up_to_the_matchers_error() -> None:
     # exact ranges in a world of straight walls: the matcher is within millimetres of the truth
     assert abs(out["along_bias_mm"]) < 2.0
     assert out["along_sd_mm"] < 10.0
+
+
+def test_matches_refined_with_equal_weights_are_split_as_they_were_made(
+    shared_data: Callable[[str], Path],
+) -> None:
+    # The depot's rooms pin some matches in every direction: those are refined with every
+    # pairing weighing the same, and the split weighs them so too.
+    out = load().measure(args(map=str(shared_data("maps/nav2-depot/depot.yaml")), length=30.0))
+    assert 0 < out["equal_weight_matches"] < out["keyframes"]
+    assert out["linear_sum_mm"] == pytest.approx(out["along_bias_mm"], abs=0.1)
 
 
 def test_a_drive_too_short_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:

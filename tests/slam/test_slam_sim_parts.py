@@ -128,3 +128,44 @@ def test_points_only_one_keyframe_saw_drop_out_of_the_local_map() -> None:
     assert kept[12:23].all()
     assert not kept[11]
     assert not kept[23]
+
+
+def _walls(*segments: tuple[float, float, float, float]) -> np.ndarray:
+    """Points every 3 cm along the segments (x0, y0, x1, y1), m."""
+    out = []
+    for x0, y0, x1, y1 in segments:
+        n = max(2, round(math.hypot(x1 - x0, y1 - y0) / 0.03))
+        t = np.linspace(0.0, 1.0, n)
+        out.append(np.column_stack((x0 + t * (x1 - x0), y0 + t * (y1 - y0))))
+    return np.concatenate(out)
+
+
+def _three_matches(walls: np.ndarray, near: np.ndarray, shift: tuple[float, float], at: tuple[float, float]):
+    """The pose the range-weighted, the adaptive and the equal-weighted matcher find for a
+    scan from ``at`` of ``walls`` whose ``near`` points read ``shift`` (m) off."""
+    scan = walls - np.array(at) + np.where(near[:, None], np.array(shift), 0.0)
+    plain = MatchConfig(range_noise_fraction=0.01)
+    configs = (plain, dataclasses.replace(plain, equal_weights_isotropy=0.25), MatchConfig())
+    truth = (at[0], at[1], 0.0)
+    return [np.array(PointMap(walls, cfg, 1.0).refine(scan, truth).pose[:2]) for cfg in configs]
+
+
+def test_where_the_scan_pins_the_pose_every_pairing_weighs_the_same() -> None:
+    # A 6 x 4 m room seen from 1 m off its west wall, which reads 5 mm long: the range weights
+    # let that near wall decide the match; the room pins the pose, so the adaptive matcher
+    # weighs it like the far east wall.
+    walls = _walls((0, 0, 6, 0), (6, 0, 6, 4), (6, 4, 0, 4), (0, 4, 0, 0))
+    plain, adaptive, equal = _three_matches(walls, walls[:, 0] < 0.01, (-0.005, 0.0), (1.0, 2.0))
+    assert abs(plain[0] - 1.0) > 0.003
+    assert abs(equal[0] - 1.0) < abs(plain[0] - 1.0) - 0.001
+    assert np.allclose(adaptive, equal, atol=2e-4), (adaptive, equal)
+
+
+def test_along_a_bare_corridor_the_range_weights_stay() -> None:
+    # Two walls 2 m apart, 20 m long, the near one reading 5 mm off: the match pins nothing
+    # along the corridor, and far returns must not pull it, so the range weights stay.
+    walls = _walls((-10, 0, 10, 0), (-10, 2, 10, 2))
+    near = (walls[:, 1] < 0.01) & (np.abs(walls[:, 0]) < 3.0)
+    plain, adaptive, equal = _three_matches(walls, near, (0.0, 0.005), (0.0, 0.5))
+    assert np.array_equal(adaptive, plain)
+    assert abs(plain[1] - equal[1]) > 0.001

@@ -16,6 +16,7 @@ wall, one seen through a door on the way in and the other on the way out, are no
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -68,6 +69,20 @@ class MatchConfig:
     # Range noise of the lidar as a fraction of the range (RPLIDAR A1M8: 0.01; 0 = none beyond
     # point_sigma_m): far points then weigh less and get wider association gates.
     range_noise_fraction: float = 0.0
+    # > 0 (with range_noise_fraction): a match whose information is at least this isotropic (x, y:
+    # weakest over strongest direction) is refined again with every pairing weighing the same.
+    # Where the scan pins the pose down in every direction the far returns' noise cannot pull it
+    # along a corridor, and the near returns, which the range weights make decide the match, read
+    # the travel long (docs/slam.md, "Equal weights where the scan pins the pose"). The match's
+    # information stays the range-weighted one.
+    equal_weights_isotropy: float = 0.0
+
+
+def isotropy(information: np.ndarray) -> float:
+    """Weakest over strongest direction of the x, y part of an (x, y, theta) information
+    matrix: 0 along a bare corridor, 1 in a room that pins the position equally every way."""
+    vals = np.linalg.eigvalsh(information[:2, :2])
+    return float(vals[0] / vals[1]) if vals[1] > 0 else 0.0
 
 
 @dataclass(frozen=True)
@@ -76,6 +91,7 @@ class Match:
     score: float  # mean likelihood of the scan points, 0..1
     inliers: float  # fraction of scan points within inlier_m of the map
     information: np.ndarray  # 3x3, of (x, y, theta), per unit weight of one scan
+    equal_weights: bool = False  # refined with every pairing weighing the same (equal_weights_isotropy)
 
 
 class PointMap:
@@ -235,21 +251,27 @@ class PointMap:
         return facing
 
     def _gates(
-        self, q: np.ndarray, viewpoint: tuple[float, float], gate: float
+        self, q: np.ndarray, viewpoint: tuple[float, float], gate: float, equal: bool = False
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Per point: association gate (m) and weight (1 = a point with point_sigma_m noise)."""
+        """Per point: association gate (m) and weight (1 = a point with point_sigma_m noise;
+        ``equal``: 1 for every point)."""
         cfg = self.config
         noise = cfg.range_noise_fraction * np.hypot(q[:, 0] - viewpoint[0], q[:, 1] - viewpoint[1])
         weight: np.ndarray = cfg.point_sigma_m**2 / (cfg.point_sigma_m**2 + noise**2)
-        return np.hypot(gate, GATE_SIGMAS * noise), weight
+        return np.hypot(gate, GATE_SIGMAS * noise), np.ones(len(q)) if equal else weight
 
     def _associate(
-        self, x: np.ndarray | Pose, q: np.ndarray, viewpoint: tuple[float, float], gate: float
+        self,
+        x: np.ndarray | Pose,
+        q: np.ndarray,
+        viewpoint: tuple[float, float],
+        gate: float,
+        equal: bool = False,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Map-frame points, pairing mask, map indices and weights of the scan points ``q``."""
         p = transform(x, q)
         if self.config.range_noise_fraction > 0:
-            gates, weight = self._gates(q, viewpoint, gate)
+            gates, weight = self._gates(q, viewpoint, gate, equal)
             dist, j = self.tree.query(p, distance_upper_bound=float(gates.max()))
             ok = np.isfinite(dist) & (dist < gates)
         else:
@@ -270,12 +292,34 @@ class PointMap:
         map does not constrain (a long corridor) near the prediction. ``viewpoint``: the
         sensor's position in the robot frame (m), for oriented normals."""
         cfg = self.config
+        match = self._evaluate(q, self._icp(q, init, prior, prior_info, viewpoint, False), viewpoint)
+        if (
+            cfg.equal_weights_isotropy > 0
+            and cfg.range_noise_fraction > 0
+            and isotropy(match.information) >= cfg.equal_weights_isotropy
+        ):
+            pose = self._icp(q, match.pose, prior, prior_info, viewpoint, True)
+            match = dataclasses.replace(self._evaluate(q, pose, viewpoint), equal_weights=True)
+        return match
+
+    def _icp(
+        self,
+        q: np.ndarray,
+        init: Pose,
+        prior: Pose | None,
+        prior_info: np.ndarray | None,
+        viewpoint: tuple[float, float],
+        equal: bool,
+    ) -> Pose:
+        """Gauss-Newton point-to-line ICP over the gates of ``icp_stages_m``; ``equal``: every
+        pairing weighs the same (else by its range noise)."""
+        cfg = self.config
         x = np.array(init, dtype=np.float64)
         jac = np.zeros((len(q), 3))
         for gate in cfg.icp_stages_m:
             for _ in range(cfg.icp_iterations):
                 c, s = math.cos(x[2]), math.sin(x[2])
-                p, ok, j, weight = self._associate(x, q, viewpoint, gate)
+                p, ok, j, weight = self._associate(x, q, viewpoint, gate, equal)
                 if ok.sum() < MIN_MATCH_POINTS:
                     break
                 n = self.normals[j[ok]]
@@ -305,8 +349,7 @@ class PointMap:
                 x += step
                 if abs(step[0]) + abs(step[1]) < 1e-5 and abs(step[2]) < 1e-5:
                     break
-        pose = (float(x[0]), float(x[1]), float((x[2] + math.pi) % (2 * math.pi) - math.pi))
-        return self._evaluate(q, pose, viewpoint)
+        return (float(x[0]), float(x[1]), float((x[2] + math.pi) % (2 * math.pi) - math.pi))
 
     def _evaluate(self, q: np.ndarray, pose: Pose, viewpoint: tuple[float, float] = (0.0, 0.0)) -> Match:
         cfg = self.config

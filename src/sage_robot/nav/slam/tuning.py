@@ -4,8 +4,9 @@ The engine's defaults (:class:`~sage_robot.nav.slam.engine.SlamConfig`) suit a s
 scanner (the SICK of the CARMEN logs). With a noisy lidar, long corridors need the fixes of
 issue #23 (``docs/slam.md``, "SLAM in simulation"): scan-to-submap edges, odometry
 calibration (and, with the gyro, odometry edges that trust it), oriented and smoothed map
-normals, local-map points two keyframes agree on, people's legs left out of matching, and
-pairings weighed by the range noise. The robot's
+normals, local-map points two keyframes agree on, people's legs left out of matching,
+pairings weighed by the range noise, and weighed the same where the scan pins the pose in
+every direction. The robot's
 ``slam`` node (``slam.range_noise_fraction`` > 0) and ``sage bench slam --sim`` both use
 :func:`noisy_lidar_config`, so the benchmark measures what the robot runs.
 """
@@ -20,6 +21,9 @@ SUBMAP_EDGE_STRIDES = (4, 8, 16, 24)  # scan-to-submap edges (see SlamConfig)
 MAP_NORMAL_NEIGHBOURS = 32  # local-map normals for a lidar with 1 % range noise
 MAP_MIN_SUPPORT = 2  # keyframes that must agree on a local-map point
 SMALL_OBJECT_M = 0.25  # foreground objects this small (legs) are not matched
+# A match at least this isotropic (x, y information: weakest / strongest direction) is refined
+# again with every pairing weighing the same (MatchConfig.equal_weights_isotropy)
+EQUAL_WEIGHTS_ISOTROPY = 0.25
 # The odometry edge between keyframes the gyro turned, once calibrated: x, y noise of this base
 # (m) + this fraction of the distance (the wheels' random noise is ~1 cm after 1 m)
 GYRO_ODOM_SIGMA_XY_M = 0.005
@@ -41,5 +45,9 @@ def noisy_lidar_config(base: SlamConfig, range_noise_fraction: float) -> SlamCon
         map_normal_neighbours=MAP_NORMAL_NEIGHBOURS,
         map_min_support=MAP_MIN_SUPPORT,
         drop_small_objects_m=SMALL_OBJECT_M,
-        match=dataclasses.replace(base.match, range_noise_fraction=range_noise_fraction),
+        match=dataclasses.replace(
+            base.match,
+            range_noise_fraction=range_noise_fraction,
+            equal_weights_isotropy=EQUAL_WEIGHTS_ISOTROPY,
+        ),
     )
