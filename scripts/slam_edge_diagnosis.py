@@ -15,11 +15,14 @@ maps one bench drive (``sage bench slam --sim``'s world and settings) and prints
 - ``oracle`` (``--oracle``): the aligned trajectory error (m) after optimising the graph again
   with one kind's measurements (or one component of them) replaced by the true ones: what that
   error costs the drive;
+- ``floor`` (``--floor``; also in ``--oracle``): the same with *every* scan edge (step,
+  submap, loop) true and the odometry as measured, then also the odometry edges' remaining
+  scale error taken out: what the odometry alone leaves;
 - ``segments``: the error along the drive, per ``--segment`` keyframes (rms, mean offset, loop
   closures ending there).
 
     python scripts/slam_edge_diagnosis.py [--map M.yaml] [--seed N] [--imu] [--sim-length M]
-        [--oracle] [--segment 50] [--set '{"loop_information_scale": 1.0}']
+        [--oracle] [--floor] [--segment 50] [--set '{"loop_information_scale": 1.0}']
 """
 
 from __future__ import annotations
@@ -157,6 +160,7 @@ def oracle(slam: Slam, truth_kf: list[Pose], truth: list[Pose]) -> dict[str, flo
         return trajectory_error(slam, g.poses, truth)
 
     out = {"as_is": reoptimised(None, None)}
+    out.update(floor(slam, truth_kf, truth))
     turned = copy.deepcopy(slam.graph)
     for e in turned.edges:
         if e.kind != "odom":
@@ -175,6 +179,29 @@ def oracle(slam: Slam, truth_kf: list[Pose], truth: list[Pose]) -> dict[str, flo
         out[f"{kind}_true"] = reoptimised(kind, None)
         for part in COMPONENTS:
             out[f"{kind}_true_{part}"] = reoptimised(kind, part)
+    return out
+
+
+def floor(slam: Slam, truth_kf: list[Pose], truth: list[Pose]) -> dict[str, float]:
+    """The error the odometry alone leaves: every scan edge (step, submap, loop) measuring the
+    true relative pose, the odometry edges as measured (``scans_true``) and, besides, the
+    odometry's remaining scale error taken out (``scans_true_odom_scaled``: each odometry edge
+    scaled by the truth's length over the whole drive / the edges' length)."""
+    g: PoseGraph = copy.deepcopy(slam.graph)
+    odo = [e for e in g.edges if e.kind == "odom"]
+    for e in g.edges:
+        if e.kind != "odom":
+            e.z = relative(truth_kf[e.i], truth_kf[e.j])
+    g.optimize(iterations=REOPTIMISE_ITERATIONS)
+    out = {"scans_true": trajectory_error(slam, g.poses, truth)}
+    true_len = sum(math.dist(truth_kf[e.i][:2], truth_kf[e.j][:2]) for e in odo)
+    odo_len = sum(math.hypot(e.z[0], e.z[1]) for e in odo)
+    k = true_len / max(odo_len, 1e-9)
+    for e in odo:
+        e.z = (e.z[0] * k, e.z[1] * k, e.z[2])
+    g.optimize(iterations=REOPTIMISE_ITERATIONS)
+    out["scans_true_odom_scaled"] = trajectory_error(slam, g.poses, truth)
+    out["odom_scale_error_pct"] = round((1 / k - 1) * 100, 3)
     return out
 
 
@@ -232,6 +259,7 @@ def main() -> None:
     ap.add_argument("--imu", action="store_true", help="the odometry turns with the gyro")
     ap.add_argument("--sim-length", type=float, default=None, help="drive at most this far (m)")
     ap.add_argument("--oracle", action="store_true", help="optimise again with true measurements")
+    ap.add_argument("--floor", action="store_true", help="only the oracle with every scan edge true")
     ap.add_argument("--segment", type=int, default=0, help="error per this many keyframes")
     ap.add_argument("--set", default="{}", help="SlamConfig fields to change (JSON; 'match': {...})")
     args = ap.parse_args()
@@ -256,6 +284,8 @@ def main() -> None:
         "ate_aligned_rmse_m": trajectory_error(slam, slam.graph.poses, truth),
         "edges": edge_table(slam, truth_kf),
     }
+    if args.floor:
+        report["floor"] = floor(slam, truth_kf, truth)
     if args.oracle:
         report["oracle"] = oracle(slam, truth_kf, truth)
     if args.segment > 0:

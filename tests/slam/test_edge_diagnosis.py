@@ -9,8 +9,12 @@ from types import ModuleType
 import numpy as np
 
 from sage_robot.core.geometry import relative
+from sage_robot.nav.slam.engine import Slam, SlamConfig
 from sage_robot.nav.slam.posegraph import KIND_SCAN, PoseGraph
 from tests.slam.scripts import load_script
+from tests.slam.synth import corridor_loop, loop_path, simulate
+
+SCAN_PERIOD_S = 0.2  # the drawn drive's scans
 
 
 def load() -> ModuleType:
@@ -56,3 +60,29 @@ def test_the_information_turns_with_the_heading() -> None:
 class _Edge:
     def __init__(self, z: tuple[float, float, float]) -> None:
         self.z = z
+
+
+def test_with_every_scan_edge_true_only_the_odometry_is_left() -> None:
+    """The floor: every step and submap edge measuring the true relative pose leaves only
+    what the odometry edges pull (here little: the drawn corridor's niches pin every scan),
+    however wrong the scan edges were; its scale error is the odometry edges' length over
+    the truth's."""
+    diag = load()
+    truth = loop_path(step_m=0.2)[:60]
+    drive = simulate(corridor_loop(), truth)
+    slam = Slam(SlamConfig(submap_edge_strides=(4, 8)), initial_pose=truth[0])
+    for k in range(len(truth)):
+        slam.add_scan(SCAN_PERIOD_S * k, drive.odom[k], drive.scans[k])
+    for e in slam.graph.edges:  # every scan edge reads 1 % long
+        if e.kind == KIND_SCAN:
+            e.z = (e.z[0] * 1.01, e.z[1] * 1.01, e.z[2])
+    slam.graph.optimize(iterations=50)
+    truth_kf = [truth[round(kf.stamp / SCAN_PERIOD_S)] for kf in slam.keyframes]
+    out = diag.floor(slam, truth_kf, truth)
+    assert diag.trajectory_error(slam, slam.graph.poses, truth) > 0.02
+    assert out["scans_true"] < 0.005
+    assert out["scans_true_odom_scaled"] < 0.005
+    odo = [e for e in slam.graph.edges if e.kind == "odom"]
+    length = sum(math.hypot(e.z[0], e.z[1]) for e in odo)
+    true_length = sum(math.dist(truth_kf[e.i][:2], truth_kf[e.j][:2]) for e in odo)
+    assert math.isclose(out["odom_scale_error_pct"], (length / true_length - 1) * 100, abs_tol=1e-3)
