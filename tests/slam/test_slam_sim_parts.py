@@ -104,6 +104,60 @@ def test_a_corridor_match_teaches_the_odometry_nothing() -> None:
     assert cal.correct((STEP_M, 0.0, 0.0)) == (STEP_M, 0.0, 0.0)
 
 
+def test_a_loop_closure_moving_the_map_is_not_read_as_travel() -> None:
+    """Every 25 scans the map (and with it the tracked pose) is corrected by 0.3 m and 0.05 rad,
+    as a loop closure does; the stretches open across it move with the map, so the scale and
+    the turn scale stay the odometry's true ones."""
+    kept, dropped = OdometryCalibration(), OdometryCalibration()
+    pose = odom = (0.0, 0.0, 0.0)
+    everywhere = np.diag([1e4, 1e4, 1e5])
+    correction = (0.3, -0.2, 0.05)
+    for k in range(600):  # 30 m straight, then turns on the spot
+        step = (STEP_M, 0.0, 0.0) if k < 300 else (0.0, 0.0, 0.2)
+        pose, odom = compose(pose, step), compose(odom, (step[0] * 1.02, 0.0, step[2] * 1.02))
+        if k % 25 == 24:
+            before, pose = pose, compose(correction, pose)
+            kept.moved(before, pose)
+        kept.observe(pose, odom, everywhere)
+        dropped.observe(pose, odom, everywhere)
+    assert abs(kept.scale - 1 / 1.02) < 0.001
+    assert abs(kept.turn_scale - 1 / 1.02) < 0.001
+    # without it: the corrections read as travel and turn
+    assert abs(dropped.scale - 1 / 1.02) > 0.01
+    assert abs(dropped.turn_scale - 1 / 1.02) > 0.01
+
+
+def test_a_tracker_that_jumped_teaches_the_odometry_nothing() -> None:
+    """Three times the tracked pose slides 0.2 m along the travel (a weak match in a corridor):
+    those stretches disagree with the calibrated odometry and are left out."""
+    cal = OdometryCalibration()
+    pose = odom = (0.0, 0.0, 0.0)
+    everywhere = np.diag([1e4, 1e4, 1e5])
+    for k in range(600):
+        pose, odom = compose(pose, (STEP_M, 0.0, 0.0)), compose(odom, (STEP_M * 1.02, 0.0, 0.0))
+        if k in (250, 400, 550):  # once 20 m have been compared
+            pose = compose(pose, (0.2, 0.0, 0.0))
+        cal.observe(pose, odom, everywhere)
+    assert cal.outliers == 3
+    assert abs(cal.scale - 1 / 1.02) < 0.0005  # each jump would have been 0.3 % of the 60 m
+
+
+def test_odometry_that_changed_is_learnt_again() -> None:
+    """After 30 m the odometry reads 6 % long instead of 2 % (another tyre): every stretch
+    disagrees, and after a few the calibration starts again from the new odometry."""
+    cal = OdometryCalibration()
+    pose = odom = (0.0, 0.0, 0.0)
+    everywhere = np.diag([1e4, 1e4, 1e5])
+    for k in range(600):
+        long = 1.02 if k < 300 else 1.06
+        pose, odom = compose(pose, (STEP_M, 0.0, 0.0)), compose(odom, (STEP_M * long, 0.0, 0.0))
+        cal.observe(pose, odom, everywhere)
+        if k == 299:
+            assert abs(cal.scale - 1 / 1.02) < 0.0005
+    assert cal.outliers >= 1
+    assert abs(cal.scale - 1 / 1.06) < 0.0005
+
+
 def test_the_far_face_of_a_thin_wall_is_not_taken_for_the_near_one() -> None:
     ys = np.arange(-2.0, 2.0, 0.03)
     west_face = np.column_stack((np.zeros_like(ys), ys))  # mapped from the west: faces -x

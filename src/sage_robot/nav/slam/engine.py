@@ -493,7 +493,8 @@ class Slam:
         self.optimizations += 1
         self._since_optimization = 0
         self.map_version += 1
-        self.pose = compose(self.graph.poses[k], offset)
+        before, self.pose = self.pose, compose(self.graph.poses[k], offset)
+        self.odometry_calibration.moved(before, self.pose)
         self._rebuild_local()
 
     def resume(self) -> None:
@@ -501,6 +502,7 @@ class Slam:
         if self.keyframes:
             self.pose = self.graph.poses[-1]
             self._last_odom = None
+            self.odometry_calibration.forget_anchors()
             self._gyro_since_keyframe = False  # the new session's odometry starts here
             self._last_map_offset = (0.0, 0.0, 0.0)
             self._rebuild_local()

@@ -13,6 +13,11 @@ is at least ``BASELINE_M`` long (the matcher's centimetre noise then weighs litt
 most ``MAX_STRETCH_M`` (a longer one crossed ground the scans did not pin down, where the
 tracker followed the very odometry it is compared with). Poses (x, y m; theta rad).
 
+Once the calibration has compared ``GATE_AFTER_M``, a stretch whose matched length disagrees
+with the calibrated odometry by more than ``MAX_DISAGREEMENT_M`` is left out (the tracker slid
+along a weakly pinned corridor). When the map moves under the tracker (an optimisation), the
+open stretches move with it (:meth:`OdometryCalibration.moved`).
+
 The turns' scale too (the wheels' track width, a gyro's sensitivity: both read a turn a
 percent or two off): the matched turn over the odometry's, from turns of at least
 ``TURN_BASELINE_RAD`` between two matched scans (a bare corridor pins the heading down even
@@ -26,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sage_robot.core.geometry import relative
+from sage_robot.core.geometry import compose, relative
 
 Pose = tuple[float, float, float]
 
@@ -39,6 +44,12 @@ MAX_STRETCH_TURN_RAD = 0.3  # ...and turns less than this (a turn's own scale er
 MIN_ISOTROPY = 0.25  # information along the travel / strongest direction, at both ends...
 MIN_ALONG_INFO = 25.0  # ...or at least this along the travel (1/m² per unit of one scan: with a
 # few hundred points the end is then known to about a centimetre)
+# ...and its matched length within this of the calibrated odometry's: the odometry's own noise
+# over 2-3 m is a centimetre or two, a tracker that slid along a weakly pinned corridor is off
+# by 5-45 cm (corridor drive, against the truth)...
+MAX_DISAGREEMENT_M = 0.05
+GATE_AFTER_M = 20.0  # ...once this much has been compared (a first estimate can be 0.5-2 % off)
+MAX_OUTLIERS_IN_ROW = 4  # this many disagreeing stretches in a row: the odometry changed, start again
 MEMORY_M = 200.0  # older stretches fade out over about this many metres
 SCALE_LIMITS = (0.8, 1.2)  # a scale outside this is not believed
 MAX_YAW_DRIFT_RAD_PER_M = 0.05
@@ -71,6 +82,8 @@ class OdometryCalibration:
         self._turn_anchor: _Anchor | None = None
         self._turned = 0.0  # odometry turn since the turn anchor (rad, signed)
         self._last_odom: Pose | None = None
+        self.outliers = 0  # stretches left out: matched and odometry lengths disagreed
+        self._outliers_in_row = 0
 
     @property
     def calibrated(self) -> bool:
@@ -108,14 +121,37 @@ class OdometryCalibration:
         self._anchor = _Anchor(pose, odom)
         if abs(d_odom[2]) > MAX_STRETCH_TURN_RAD or dist > MAX_STRETCH_M:
             return
+        matched = math.hypot(d_est[0], d_est[1])
+        if self._sum_odom >= GATE_AFTER_M and abs(matched - self.scale * dist) > MAX_DISAGREEMENT_M:
+            self.outliers += 1  # the tracker jumped (a weak match slid along a corridor)...
+            self._outliers_in_row += 1
+            if self._outliers_in_row < MAX_OUTLIERS_IN_ROW:
+                return
+            # ...or the odometry changed (a tyre, a load): what was learnt no longer holds
+            self._sum_est = self._sum_odom = self._sum_yaw = 0.0
+        self._outliers_in_row = 0
         keep = math.exp(-dist / MEMORY_M)
-        self._sum_est = keep * self._sum_est + math.hypot(d_est[0], d_est[1])
+        self._sum_est = keep * self._sum_est + matched
         self._sum_odom = keep * self._sum_odom + dist
         self._sum_yaw = keep * self._sum_yaw + math.remainder(d_odom[2] - d_est[2], 2 * math.pi)
         scale = self._sum_est / self._sum_odom
         self.scale = min(max(scale, SCALE_LIMITS[0]), SCALE_LIMITS[1])
         yaw = self._sum_yaw / self._sum_odom
         self.yaw_per_m = min(max(yaw, -MAX_YAW_DRIFT_RAD_PER_M), MAX_YAW_DRIFT_RAD_PER_M)
+
+    def moved(self, before: Pose, after: Pose) -> None:
+        """The map moved under the tracker (an optimisation: a loop closed): the current pose
+        went from ``before`` to ``after``. The open stretches' anchors, measured against the
+        same local map as the current pose, move with it; else the next stretch would read the
+        correction as travel (on the corridor drive 20-45 cm in a 2 m stretch at the junction)."""
+        for anchor in (self._anchor, self._turn_anchor):
+            if anchor is not None:
+                anchor.pose = compose(after, relative(before, anchor.pose))
+
+    def forget_anchors(self) -> None:
+        """The odometry starts again (a resumed session): no stretch spans the gap."""
+        self._anchor = self._turn_anchor = None
+        self._turned, self._last_odom = 0.0, None
 
     def _observe_turn(self, pose: Pose, odom: Pose, matched: bool) -> None:
         """The turn scale: matched turn / odometry turn over turns between matched scans."""
