@@ -51,6 +51,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--pairs-gap", type=int, default=2, help="scan gap of self-reference relations")
     p.add_argument("--seed", type=int, default=0, help="odometry noise seed")
+    p.add_argument(
+        "--seeds",
+        help="with --sim: drive these seeds (0-15, 0,3,7) and report each and their mean and spread",
+    )
+    p.add_argument("--jobs", type=int, default=1, help="with --seeds: drives at a time (one process each)")
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -64,6 +69,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     from sage_robot.nav.slam.relations import Relation, read_relations, relation_error
     from sage_robot.nav.slam.replay import noisy_odometry, replay_log
 
+    if args.seeds is not None and not args.sim:
+        raise ConfigError("--seeds drives the simulated robot: give it with --sim")
+    if args.sim and args.seeds is not None:
+        from sage_robot.bench.slam_seeds import parse_seeds, run_seeds
+
+        return run_seeds(parse_seeds(args.seeds), args.jobs, args.sim_length, args.map, args.route, args.imu)
     if args.sim:
         from sage_robot.bench.slam_sim import run_check
 
