@@ -82,3 +82,14 @@ def test_command_line_errors_are_one_line(tmp_path: Path, capsys: pytest.Capture
     err = capsys.readouterr().err
     assert "no such map file" in err
     assert "Traceback" not in err
+
+
+def test_drives_that_do_not_finish_are_stopped(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The wait for the drives has a bound: past it the workers are stopped and it says so."""
+    from sage_robot.bench import slam_seeds
+    from sage_robot.core.errors import SageError
+
+    room = str(_room_with_a_pillar(tmp_path))
+    monkeypatch.setattr(slam_seeds, "MAX_DRIVE_S", 0.2)  # a drive (and its worker's start) takes longer
+    with pytest.raises(SageError, match=r"did not finish within 0\.2 s"):
+        run_seeds([0, 1], jobs=2, max_length_m=DRIVE_M, map_path=room)

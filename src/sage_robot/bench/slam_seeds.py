@@ -12,10 +12,9 @@ from __future__ import annotations
 
 import math
 import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
-from sage_robot.core.errors import ConfigError
+from sage_robot.core.errors import ConfigError, SageError
 
 # Issue #23's targets for a simulated drive: trajectory error after the rigid alignment, mean
 # distance from the mapped walls to the true ones, share of the true walls mapped
@@ -81,10 +80,15 @@ def run_seeds(
         runs = [_drive(c) for c in calls]
     else:
         # spawn: a fresh interpreter per worker (no state forked from this process)
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(jobs, len(seeds)), mp_context=ctx) as pool:
-            timeout = MAX_DRIVE_S * math.ceil(len(seeds) / jobs)
-            runs = list(pool.map(_drive, calls, timeout=timeout))
+        pool = multiprocessing.get_context("spawn").Pool(min(jobs, len(seeds)))
+        timeout = MAX_DRIVE_S * math.ceil(len(seeds) / jobs)
+        try:
+            runs = pool.map_async(_drive, calls, chunksize=1).get(timeout)
+        except multiprocessing.TimeoutError:
+            raise SageError(f"the drives did not finish within {timeout:g} s: stopped") from None
+        finally:
+            pool.terminate()
+            pool.join()
     return summarize(seeds, runs)
 
 
