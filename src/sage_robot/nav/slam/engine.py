@@ -28,6 +28,7 @@ from scipy.spatial import cKDTree
 
 from sage_robot.core.geometry import compose, relative
 from sage_robot.nav.slam.dynamic import small_foreground, supported
+from sage_robot.nav.slam.endwall import EndWallRuler
 from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap, smooth_normals
 from sage_robot.nav.slam.odomcal import OdometryCalibration
 from sage_robot.nav.slam.points import Pose, Scan, normals, rotate, transform, voxel_filter, voxel_indices
@@ -97,6 +98,9 @@ class SlamConfig:
     loop_information_scale: float = 0.5  # a loop edge counts this much of a scan-match edge
     loop_every_keyframes: int = 2  # try a loop closure every this many keyframes
     calibrate_odometry: bool = False  # learn the odometry's scale and heading drift (odomcal)
+    # ...also from the lidar's straight-ahead range while the gyro holds the heading (endwall):
+    # a ruler without the scan matcher's travel bias
+    end_wall_ruler: bool = False
     oriented_normals: bool = False  # match only map surfaces that face the scan's sensor
     # > 0: the local map's normals are fitted again on the merged keyframes, to this many
     # neighbours within map_normal_radius_m (for a noisy lidar; 0: each keyframe's own normals)
@@ -194,6 +198,7 @@ class Slam:
         self._since_loop_try = 0
         self._since_optimization = 0  # keyframes added since the graph was last optimised
         self.odometry_calibration = OdometryCalibration()
+        self._end_walls = EndWallRuler()
         # gyro-turned odometry edges and their raw steps: each optimisation measures them again
         # with the calibration learnt so far (calibrate_odometry)
         self._odometry_edges: list[tuple[Edge, Pose]] = []
@@ -207,6 +212,9 @@ class Slam:
         """Track one scan taken at the odometry pose ``odom``; ``gyro``: the odometry's turn
         since the previous scan is a gyro's (:mod:`~sage_robot.nav.slam.gyro`)."""
         cfg = self.config
+        if cfg.calibrate_odometry and cfg.end_wall_ruler:  # a straight stretch needs the gyro
+            for fit in self._end_walls.step(odom, scan) if gyro else self._end_walls.end():
+                self.odometry_calibration.add_ruler(fit.scale, fit.span_m)
         q = voxel_filter(self._scan_points(scan), cfg.scan_voxel_m)
         if self._last_odom is None and self.keyframes:  # a resumed session: start at its last keyframe
             self._last_odom = odom
@@ -503,6 +511,7 @@ class Slam:
             self.pose = self.graph.poses[-1]
             self._last_odom = None
             self.odometry_calibration.forget_anchors()
+            self._end_walls = EndWallRuler()
             self._gyro_since_keyframe = False  # the new session's odometry starts here
             self._last_map_offset = (0.0, 0.0, 0.0)
             self._rebuild_local()

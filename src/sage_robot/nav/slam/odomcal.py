@@ -18,6 +18,10 @@ with the calibrated odometry by more than ``MAX_DISAGREEMENT_M`` is left out (th
 along a weakly pinned corridor). When the map moves under the tracker (an optimisation), the
 open stretches move with it (:meth:`OdometryCalibration.moved`).
 
+Another ruler's readings of the scale count as stretches too (:meth:`OdometryCalibration.add_ruler`:
+the lidar's range to a wall straight ahead while driving straight, :mod:`endwall`), once the
+stretches have compared ``GATE_AFTER_M`` and within ``MAX_RULER_DISAGREEMENT`` of their scale.
+
 The turns' scale too (the wheels' track width, a gyro's sensitivity: both read a turn a
 percent or two off): the matched turn over the odometry's, from turns of at least
 ``TURN_BASELINE_RAD`` between two matched scans (a bare corridor pins the heading down even
@@ -49,6 +53,10 @@ MIN_ALONG_INFO = 25.0  # ...or at least this along the travel (1/m² per unit of
 # by 5-45 cm (corridor drive, against the truth)...
 MAX_DISAGREEMENT_M = 0.05
 GATE_AFTER_M = 20.0  # ...once this much has been compared (a first estimate can be 0.5-2 % off)
+# another ruler's scale (add_ruler) this far from the one learnt is left out: the stretches'
+# first 20 m are good to a percent, a beam that followed a walking person or another wall reads
+# 5-50 % off
+MAX_RULER_DISAGREEMENT = 0.02
 MAX_OUTLIERS_IN_ROW = 4  # this many disagreeing stretches in a row: the odometry changed, start again
 MEMORY_M = 200.0  # older stretches fade out over about this many metres
 SCALE_LIMITS = (0.8, 1.2)  # a scale outside this is not believed
@@ -74,7 +82,8 @@ class OdometryCalibration:
         self.yaw_per_m = 0.0
         self._sum_est = 0.0  # decaying sums of matched and odometry distances (m)
         self._sum_odom = 0.0
-        self._sum_yaw = 0.0  # decaying sum of heading differences (rad)
+        self._sum_yaw = 0.0  # decaying sum of heading differences (rad)...
+        self._sum_yaw_odom = 0.0  # ...over this much odometry (m; the stretches' only)
         self._anchor: _Anchor | None = None
         self.turn_scale = 1.0
         self._sum_turn_est = 0.0  # decaying sums of matched and odometry turns (rad)
@@ -83,6 +92,8 @@ class OdometryCalibration:
         self._turned = 0.0  # odometry turn since the turn anchor (rad, signed)
         self._last_odom: Pose | None = None
         self.outliers = 0  # stretches left out: matched and odometry lengths disagreed
+        self.ruler_outliers = 0  # other rulers' readings left out (add_ruler)
+        self._stretches_m = 0.0  # odometry the stretches compared since the start or a reset (m)
         self._outliers_in_row = 0
 
     @property
@@ -128,16 +139,40 @@ class OdometryCalibration:
             if self._outliers_in_row < MAX_OUTLIERS_IN_ROW:
                 return
             # ...or the odometry changed (a tyre, a load): what was learnt no longer holds
-            self._sum_est = self._sum_odom = self._sum_yaw = 0.0
+            self._sum_est = self._sum_odom = self._sum_yaw = self._sum_yaw_odom = 0.0
+            self._stretches_m = 0.0
         self._outliers_in_row = 0
+        self._stretches_m += dist
+        self._add_length(matched, dist)
+        keep = math.exp(-dist / MEMORY_M)
+        self._sum_yaw = keep * self._sum_yaw + math.remainder(d_odom[2] - d_est[2], 2 * math.pi)
+        self._sum_yaw_odom = keep * self._sum_yaw_odom + dist
+        yaw = self._sum_yaw / self._sum_yaw_odom
+        self.yaw_per_m = min(max(yaw, -MAX_YAW_DRIFT_RAD_PER_M), MAX_YAW_DRIFT_RAD_PER_M)
+
+    def add_ruler(self, scale: float, span_m: float) -> bool:
+        """Another ruler's reading of the odometry's scale (true travel / odometry travel) over
+        ``span_m`` of odometry (:mod:`~sage_robot.nav.slam.endwall`); it counts as a stretch of
+        that length. Taken only once the stretches alone have compared ``GATE_AFTER_M``, and
+        within ``MAX_RULER_DISAGREEMENT`` of the scale learnt: a person walking ahead at a
+        tenth of the robot's speed reads 10 % off, a beam that followed another wall more.
+        True when taken."""
+        if not SCALE_LIMITS[0] < scale < SCALE_LIMITS[1] or span_m <= 0:
+            return False
+        if self._stretches_m < GATE_AFTER_M:
+            return False
+        if abs(scale - self.scale) > MAX_RULER_DISAGREEMENT:
+            self.ruler_outliers += 1
+            return False
+        self._add_length(scale * span_m, span_m)
+        return True
+
+    def _add_length(self, matched: float, dist: float) -> None:
         keep = math.exp(-dist / MEMORY_M)
         self._sum_est = keep * self._sum_est + matched
         self._sum_odom = keep * self._sum_odom + dist
-        self._sum_yaw = keep * self._sum_yaw + math.remainder(d_odom[2] - d_est[2], 2 * math.pi)
         scale = self._sum_est / self._sum_odom
         self.scale = min(max(scale, SCALE_LIMITS[0]), SCALE_LIMITS[1])
-        yaw = self._sum_yaw / self._sum_odom
-        self.yaw_per_m = min(max(yaw, -MAX_YAW_DRIFT_RAD_PER_M), MAX_YAW_DRIFT_RAD_PER_M)
 
     def moved(self, before: Pose, after: Pose) -> None:
         """The map moved under the tracker (an optimisation: a loop closed): the current pose

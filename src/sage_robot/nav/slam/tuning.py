@@ -3,7 +3,8 @@
 The engine's defaults (:class:`~sage_robot.nav.slam.engine.SlamConfig`) suit a survey-grade
 scanner (the SICK of the CARMEN logs). With a noisy lidar, long corridors need the fixes of
 issue #23 (``docs/slam.md``, "SLAM in simulation"): scan-to-submap edges, odometry
-calibration (and, with the gyro, odometry edges that trust it), oriented and smoothed map
+calibration (and, with the gyro, odometry edges that trust it and the lidar's range to a wall
+straight ahead as a second ruler of the odometry's scale), oriented and smoothed map
 normals, local-map points two keyframes agree on, people's legs left out of matching,
 pairings weighed by the range noise, and weighed the same where the scan pins the pose in
 every direction. The robot's
@@ -39,6 +40,7 @@ def noisy_lidar_config(base: SlamConfig, range_noise_fraction: float) -> SlamCon
         base,
         submap_edge_strides=SUBMAP_EDGE_STRIDES,
         calibrate_odometry=True,
+        end_wall_ruler=True,
         gyro_odom_sigma_xy_m=GYRO_ODOM_SIGMA_XY_M,
         gyro_odom_sigma_xy_fraction=GYRO_ODOM_SIGMA_XY_FRACTION,
         oriented_normals=True,
