@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from sage_robot.core.geometry import compose
-from sage_robot.nav.slam.endwall import MAX_RANGE_M, EndWallRuler, fit_wall, straight_range
+from sage_robot.nav.slam.endwall import MAX_RANGE_M, MAX_SCANS, EndWallRuler, fit_wall, straight_range
 from sage_robot.nav.slam.odomcal import GATE_AFTER_M, OdometryCalibration
 from sage_robot.nav.slam.points import Scan
 
@@ -88,6 +88,16 @@ def test_a_straight_stretch_ends_at_a_turn_with_both_walls_read() -> None:
         assert abs(fit.scale - 1 / ODOM_LONG) < 0.01
         assert fit.span_m > 3.0
     assert ruler.end() == []  # the new stretch has one scan
+
+
+def test_a_robot_standing_still_keeps_no_endless_stretch() -> None:
+    rng = np.random.default_rng(5)
+    ruler = EndWallRuler()
+    scan = _scan(5.0, 3.0, rng)
+    for _ in range(MAX_SCANS + 10):
+        assert ruler.step((1.0, 2.0, 0.5), scan) == []  # no travel: nothing to fit, no error
+    assert len(ruler._travel) == 10  # the stretch started again after MAX_SCANS
+    assert ruler.step((1.0, 2.0, 0.8), scan) == []  # a turn ends a stretch without travel
 
 
 def test_the_calibration_takes_a_ruler_once_stretches_set_the_scale_and_not_far_from_it() -> None:

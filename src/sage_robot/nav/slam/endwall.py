@@ -31,6 +31,7 @@ MAX_HEADING_CHANGE_RAD = 0.05  # a straight stretch keeps its heading within thi
 MAX_STEP_TURN_RAD = 0.01  # ...and no step turns more than this
 MIN_SCANS = 15  # a fit needs this many ranges on one wall...
 MIN_SPAN_M = 3.0  # ...spread over this much travel
+MAX_SCANS = 3000  # a stretch this long is fitted and started again (a robot standing still)
 # a range belongs to the same wall when it is within this (m, + this fraction of the range, the
 # lidar's noise) of the previous one moved by the travel
 SAME_WALL_M = 0.1
@@ -71,7 +72,7 @@ def fit_wall(travel: np.ndarray, ranges: np.ndarray, sign: float) -> WallFit | N
     best = max(best, run, key=len)
     x, y = travel[best], ranges[best]
     for _ in range(2):
-        if len(x) < MIN_SCANS:
+        if len(x) < MIN_SCANS or float(np.ptp(x)) < MIN_SPAN_M:  # (standing still: no slope)
             return None
         slope, icpt = np.polyfit(x, y, 1)
         res = y - (slope * x + icpt)
@@ -100,7 +101,7 @@ class EndWallRuler:
         if self._heading is not None:
             turned = abs(math.remainder(odom[2] - self._heading, 2 * math.pi))
             step = abs(math.remainder(odom[2] - self._last_heading, 2 * math.pi))
-            if turned > MAX_HEADING_CHANGE_RAD or step > MAX_STEP_TURN_RAD:
+            if turned > MAX_HEADING_CHANGE_RAD or step > MAX_STEP_TURN_RAD or len(self._travel) >= MAX_SCANS:
                 fits = self.end()
         if self._heading is None:
             self._heading, self._origin = odom[2], (odom[0], odom[1])
