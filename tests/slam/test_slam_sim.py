@@ -7,6 +7,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+import yaml
 from scipy.ndimage import binary_dilation
 
 from sage_robot.bench.slam_sim import run_check
@@ -95,3 +96,19 @@ def test_bad_input_is_a_clear_error(tmp_path: Path) -> None:
     write_map(blank(20, 20, 0.05, value=WALL), boxed)
     with pytest.raises(ConfigError, match="no free space"):
         run_check(map_path=boxed)
+
+
+def test_a_map_saved_turned_is_driven_in_its_image_frame(tmp_path: Path) -> None:
+    """``origin: [x, y, yaw]`` with a yaw only turns the whole building in the map frame:
+    the drive, the mapping and every score are those of the same map saved level."""
+    level = _two_rooms_and_a_corridor(tmp_path)
+    turned = tmp_path / "turned.yaml"
+    meta = yaml.safe_load(level.read_text())
+    meta["origin"][2] = 0.7
+    meta["image"] = str(level.with_suffix(".pgm"))
+    turned.write_text(yaml.safe_dump(meta))
+    a = run_check(max_length_m=6.0, map_path=level, seed=1)
+    b = run_check(max_length_m=6.0, map_path=turned, seed=1)
+    for r in (a, b):
+        r.pop("cpu_s"), r.pop("map")
+    assert a == b

@@ -33,6 +33,7 @@ Scores, against the true poses and the true map (with its clutter):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -75,6 +76,18 @@ def plan_drive(grid: Any, route: str, max_length_m: float | None) -> list[Pose]:
     if len(poses) < 2:
         raise ConfigError("the drive is too short to map anything: give a longer --sim-length or another map")
     return poses
+
+
+def level_origin(grid: Any) -> Any:
+    """``grid`` with its origin's yaw dropped: a map saved turned (``origin: [x, y, yaw]``) is
+    simulated and mapped in its image's frame. The yaw only turns the whole building in the
+    map frame, which changes nothing for a drive through it, and navigation's costmaps, the
+    people's paths and the lidar's ray casting all work on maps whose rows run along x."""
+    from sage_robot.core.msgs import Pose2D
+
+    if grid.origin.theta == 0.0:
+        return grid
+    return dataclasses.replace(grid, origin=Pose2D(grid.origin.x, grid.origin.y, 0.0))
 
 
 def slam_config(spec: Any) -> Any:
@@ -128,7 +141,7 @@ def map_drive(
         raise ConfigError(
             "--route corridor drives the shipped building's corridors: use --route auto with --map"
         )
-    truth_grid = read_map(path)
+    truth_grid = level_origin(read_map(path))
     truth = plan_drive(truth_grid, route, max_length_m)
     world = SimDrive(truth_grid, truth, seed, people=people, clutter=clutter, gyro=gyro)
     sp = world.spec
