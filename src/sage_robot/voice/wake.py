@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import threading
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -149,12 +150,18 @@ class OpenWakeWordEngine:
         self._initial_features = pre._get_embeddings(warm)
         self._specs = tuple(specs)
         self._twin: OpenWakeWordEngine | None = None
+        # One engine serves every pipeline built on the loaded models: a pipeline built again
+        # resets it while the last frame of the one stopped before may still be scored in a
+        # worker thread. openWakeWord's buffers are not thread-safe; a reset half-way through
+        # a prediction could leave the old audio (a wake word) in them.
+        self._lock = threading.Lock()
         self.reset()
 
     def features(self) -> np.ndarray:
         """The window of speech embeddings the models scored last: (16, 96)."""
         pre: Any = self._model.preprocessor
-        return np.asarray(pre.get_features(HEAD_FRAMES)[0], dtype=np.float64)
+        with self._lock:
+            return np.asarray(pre.get_features(HEAD_FRAMES)[0], dtype=np.float64)
 
     def twin(self) -> OpenWakeWordEngine:
         """A second engine with the same models and its own audio history (made once)."""
@@ -168,17 +175,19 @@ class OpenWakeWordEngine:
 
     def reset(self) -> None:
         pre: Any = self._model.preprocessor
-        pre.raw_data_buffer.clear()
-        pre.melspectrogram_buffer = np.ones((76, 32))  # openWakeWord's initial mel state
-        pre.accumulated_samples = 0
-        pre.raw_data_remainder = np.empty(0)
-        pre.feature_buffer = self._initial_features.copy()
-        self._model.reset()
+        with self._lock:
+            pre.raw_data_buffer.clear()
+            pre.melspectrogram_buffer = np.ones((76, 32))  # openWakeWord's initial mel state
+            pre.accumulated_samples = 0
+            pre.raw_data_remainder = np.empty(0)
+            pre.feature_buffer = self._initial_features.copy()
+            self._model.reset()
 
     def score(self, frame: np.ndarray) -> dict[str, float]:
         if len(frame) != FRAME_SAMPLES:
             raise ValueError(f"a wake frame is {FRAME_SAMPLES} samples, got {len(frame)}")
-        raw = self._model.predict(to_int16(frame))
+        with self._lock:
+            raw = self._model.predict(to_int16(frame))
         return {name: float(raw[key]) for name, key in self._keys.items()}
 
 
