@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import threading
 
 import numpy as np
 import pytest
@@ -13,6 +14,8 @@ from sage_robot.voice.audio_io import resample
 from sage_robot.voice.wake import OpenWakeWordEngine, WakeDetector, bundled_wake_models
 
 from .conftest import noise, silence
+
+WAIT_S = 30.0  # bound on every wait for a thread (real seconds)
 
 NEUTRAL = [
     "Welcome to the engineering building.",
@@ -238,3 +241,41 @@ def test_a_new_detector_does_not_hear_what_an_earlier_one_was_fed(models, voice_
     second = WakeDetector.from_settings(models.wake, voice_settings)
     assert not second.feed(silence(2.0))
     assert second.max_smoothed["hey_jarvis"] < 0.05
+
+
+def test_a_reset_waits_for_a_score_in_progress(models, monkeypatch):
+    """One engine serves every pipeline built on the loaded models: a new pipeline's reset
+    must not interleave with the last frame a stopped one is still scoring in a worker
+    thread (openWakeWord's buffers are not thread-safe)."""
+    engine = models.wake
+    model = engine._model
+    events: list[str] = []
+    inside, release = threading.Event(), threading.Event()
+    predict, reset = model.predict, model.reset
+
+    def slow_predict(frame):
+        events.append("predict starts")
+        inside.set()
+        assert release.wait(WAIT_S)
+        out = predict(frame)
+        events.append("predict ends")
+        return out
+
+    def logged_reset():
+        reset()
+        events.append("reset")
+
+    monkeypatch.setattr(model, "predict", slow_predict)
+    monkeypatch.setattr(model, "reset", logged_reset)
+    scorer = threading.Thread(target=engine.score, args=(np.zeros(FRAME_SAMPLES, dtype=np.int16),))
+    scorer.start()
+    assert inside.wait(WAIT_S)
+    resetter = threading.Thread(target=engine.reset)
+    resetter.start()
+    resetter.join(0.2)  # it cannot finish while the score holds the engine
+    release.set()
+    scorer.join(WAIT_S)
+    resetter.join(WAIT_S)
+    assert not scorer.is_alive()
+    assert not resetter.is_alive()
+    assert events == ["predict starts", "predict ends", "reset"]
