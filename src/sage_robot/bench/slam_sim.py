@@ -202,6 +202,7 @@ def run_check(
         "keyframes": len(slam.keyframes),
         "loop_closures": slam.loop_closures,
         "odometry_slips": slam.odometry_slips,
+        "doubtful_turns": slam.doubtful_turns,
         "cpu_s": round(cpu_s, 2),
         "ate_rmse_m": round(float(np.sqrt((err**2).mean())), 4),
         "ate_aligned_rmse_m": round(rigid.rmse_m, 4),

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from sage_robot.core.geometry import compose, relative
 from sage_robot.nav.slam.dynamic import small_foreground, supported
-from sage_robot.nav.slam.endwall import EndWallRuler
+from sage_robot.nav.slam.endwall import EndWallRuler, WallFit
 from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap, smooth_normals
 from sage_robot.nav.slam.odomcal import OdometryCalibration
 from sage_robot.nav.slam.points import Pose, Scan, normals, rotate, transform, voxel_filter, voxel_indices
@@ -81,6 +81,19 @@ class SlamConfig:
     # heading alone stiff edges made drives slide: docs/slam.md, "Odometry edges")
     gyro_odom_sigma_xy_m: float = 0.05
     gyro_odom_sigma_xy_fraction: float = 0.2
+    # > 0 (with calibrate_odometry): once the calibration's scale is known to this standard
+    # error (a fraction, OdometryCalibration.scale_error), the wheel-turned odometry edges get
+    # those stiff x, y sigmas too (their heading keeps the wheels' weak noise), and every
+    # optimisation measures their x, y again with the calibration. Along a bare corridor only
+    # the odometry knows the travel; with weak edges the map took the tracker's, which wanders
+    # four times more; with a scale not yet known they carry its error instead (docs/slam.md,
+    # "The wheels alone"). A slip still falls back to the weak noise (SLIP_SIGMAS).
+    wheel_travel_scale_error: float = 0.0
+    # > 0: a doubtful match (inliers below DOUBTFUL_INLIERS) whose heading is this far (rad) from
+    # the odometry's prediction is not believed, and the scan is dead-reckoned: the wheels turn
+    # a hundredth of a radian off in a scan, a scan that fits the local map poorly fits a turned
+    # copy of it about as well (a robot turning in a doorway, docs/slam.md, "The wheels alone")
+    doubtful_turn_gate_rad: float = 0.0
     odom_sigma_xy_m: float = 0.05  # odometry edge noise: base + fraction of the motion
     odom_sigma_theta_rad: float = 0.03
     odom_sigma_fraction: float = 0.2
@@ -98,8 +111,9 @@ class SlamConfig:
     loop_information_scale: float = 0.5  # a loop edge counts this much of a scan-match edge
     loop_every_keyframes: int = 2  # try a loop closure every this many keyframes
     calibrate_odometry: bool = False  # learn the odometry's scale and heading drift (odomcal)
-    # ...also from the lidar's straight-ahead range while the gyro holds the heading (endwall):
-    # a ruler without the scan matcher's travel bias
+    # ...also from the lidar's straight-ahead range while the robot drives straight (endwall;
+    # judged on the gyro's heading, or without a gyro on the tracked one): a ruler without the
+    # scan matcher's travel bias
     end_wall_ruler: bool = False
     oriented_normals: bool = False  # match only map surfaces that face the scan's sensor
     # > 0: the local map's normals are fitted again on the merged keyframes, to this many
@@ -199,9 +213,12 @@ class Slam:
         self._since_optimization = 0  # keyframes added since the graph was last optimised
         self.odometry_calibration = OdometryCalibration()
         self._end_walls = EndWallRuler()
-        # gyro-turned odometry edges and their raw steps: each optimisation measures them again
-        # with the calibration learnt so far (calibrate_odometry)
-        self._odometry_edges: list[tuple[Edge, Pose]] = []
+        self._wheel_line: Pose | None = None  # the wheels' travel laid along the tracked heading
+        self.doubtful_turns = 0  # doubtful matches not believed: turned away from the odometry
+        # odometry edges, their raw steps and whether the gyro turned them: each optimisation
+        # measures them again with the calibration learnt so far (calibrate_odometry; the
+        # wheels' once wheel_travel_scale_error is met, in x, y only)
+        self._odometry_edges: list[tuple[Edge, Pose, bool]] = []
         # the occupancy grid's scans in the order they came: (keyframe, -1 for its own scan
         # or the index into its map_scans)
         self._map_index: list[tuple[int, int]] = []
@@ -212,9 +229,8 @@ class Slam:
         """Track one scan taken at the odometry pose ``odom``; ``gyro``: the odometry's turn
         since the previous scan is a gyro's (:mod:`~sage_robot.nav.slam.gyro`)."""
         cfg = self.config
-        if cfg.calibrate_odometry and cfg.end_wall_ruler:  # a straight stretch needs the gyro
-            for fit in self._end_walls.step(odom, scan) if gyro else self._end_walls.end():
-                self.odometry_calibration.add_ruler(fit.scale, fit.span_m)
+        if cfg.calibrate_odometry and cfg.end_wall_ruler and gyro:
+            self._end_wall_fits(self._end_walls.step(odom, scan), wheels=False)
         q = voxel_filter(self._scan_points(scan), cfg.scan_voxel_m)
         if self._last_odom is None and self.keyframes:  # a resumed session: start at its last keyframe
             self._last_odom = odom
@@ -223,32 +239,24 @@ class Slam:
             self._add_keyframe(stamp, odom, scan, self.initial_pose, None)
             self.trajectory.append(_TrajectoryEntry(stamp, 0, (0.0, 0.0, 0.0)))
             return StepResult(self.pose, 1.0, 1.0, True, False)
+        forward = relative(self._last_odom, odom)[0]  # the wheels' travel (m, raw)
         step = self._odometry_step(self._last_odom, odom)
-        predicted = compose(self.pose, step)
+        odometry = compose(self.pose, step)
         self._last_odom = odom
         self._step_dist = math.hypot(step[0], step[1])
         self._step_turn = abs(step[2])
         self._step_gyro = gyro
         self._gyro_since_keyframe &= gyro
-        view = (scan.laser[0], scan.laser[1])
-        match = self._track(q, predicted, view)
-        if self._doubtful(step, match):
-            # Odometry glitches (frozen, then a jump) happen: also try "as the last step" and
-            # "no motion", and keep the prediction whose match fits best. The wheels glitch,
-            # not the gyro: a step it turned keeps its turn in both guesses.
-            last, still = self._last_step, (0.0, 0.0, 0.0)
-            if gyro:
-                last, still = (last[0], last[1], step[2]), (0.0, 0.0, step[2])
-            for guess in (compose(self.pose, last), compose(self.pose, still)):
-                other = self._track(q, guess, view)
-                if other is not None and (match is None or other.inliers > match.inliers + GLITCH_MARGIN):
-                    match, predicted = other, guess
+        match = self._match(q, step, odometry, (scan.laser[0], scan.laser[1]), gyro)
         if match is None or match.inliers < cfg.min_track_inliers:
-            pose, score, inliers = predicted, 0.0, match.inliers if match else 0.0
+            # dead-reckoned by the odometry: a glitch guess is only as good as its match
+            pose, score, inliers = odometry, 0.0, match.inliers if match else 0.0
             self.odometry_calibration.observe(pose, odom, None)
         else:
             pose, score, inliers = match.pose, match.score, match.inliers
             self.odometry_calibration.observe(pose, odom, match.information)
+        if cfg.calibrate_odometry and cfg.end_wall_ruler and not gyro:
+            self._wheel_end_walls(forward, pose[2] if score > 0 else None, scan)
         self._last_step = relative(self.pose, pose)
         self.pose, self.last_score = pose, score
         kf = len(self.keyframes) - 1
@@ -265,6 +273,61 @@ class Slam:
         self._since_optimization += 1
         closed = self._try_loop_closure()
         return StepResult(self.pose, score, inliers, True, closed)
+
+    def _match(
+        self, q: np.ndarray, step: Pose, odometry: Pose, view: tuple[float, float], gyro: bool
+    ) -> Match | None:
+        """The scan's match from the odometry's prediction ``odometry``, or from a glitch guess
+        when that one is doubtful; None for a doubtful match turned away from the odometry."""
+        match = self._track(q, odometry, view)
+        if self._doubtful(step, match):
+            # Odometry glitches (frozen, then a jump) happen: also try "as the last step" and
+            # "no motion", and keep the prediction whose match fits best. The wheels glitch,
+            # not the gyro: a step it turned keeps its turn in both guesses.
+            last, still = self._last_step, (0.0, 0.0, 0.0)
+            if gyro:
+                last, still = (last[0], last[1], step[2]), (0.0, 0.0, step[2])
+            for guess in (compose(self.pose, last), compose(self.pose, still)):
+                other = self._track(q, guess, view)
+                if other is not None and (match is None or other.inliers > match.inliers + GLITCH_MARGIN):
+                    match = other
+        if match is not None and self._turned_away(match, odometry):
+            self.doubtful_turns += 1
+            return None
+        return match
+
+    def _wheel_travel_known(self) -> bool:
+        """Is the calibration's scale known well enough for the wheels' travel to be stiff?"""
+        return self.odometry_calibration.scale_error <= self.config.wheel_travel_scale_error
+
+    def _turned_away(self, match: Match, odometry: Pose) -> bool:
+        """Is this a doubtful match turned further from the odometry's prediction than
+        ``doubtful_turn_gate_rad``?"""
+        gate = self.config.doubtful_turn_gate_rad
+        if gate <= 0 or match.inliers >= DOUBTFUL_INLIERS:
+            return False
+        return abs(math.remainder(match.pose[2] - odometry[2], 2 * math.pi)) > gate
+
+    def _wheel_end_walls(self, forward_m: float, heading: float | None, scan: Scan) -> None:
+        """The end-wall ruler without a gyro: the wheels' travel laid along the tracked heading
+        (a corridor pins the heading down; the wheels' own drifts 0.01 rad a metre, which the
+        ruler would take for turns). ``heading`` None: the scan was not matched."""
+        if heading is None:
+            self._end_wall_fits(self._end_walls.end(), wheels=False)
+            return
+        fits = self._end_walls.end() if self._wheel_line is None else []  # a gyro's stretch ends
+        self._end_wall_fits(fits, wheels=True)
+        x, y, _ = self._wheel_line or (0.0, 0.0, heading)
+        self._wheel_line = (x + forward_m * math.cos(heading), y + forward_m * math.sin(heading), heading)
+        self._end_wall_fits(self._end_walls.step(self._wheel_line, scan), wheels=True)
+
+    def _end_wall_fits(self, fits: list[WallFit], wheels: bool) -> None:
+        """Hand the ruler's fits to the calibration; ``wheels``: the stretch goes on along the
+        tracked heading (else a gyro's or none: the wheels' line starts again)."""
+        if not wheels:
+            self._wheel_line = None
+        for fit in fits:
+            self.odometry_calibration.add_ruler(fit.scale, fit.span_m)
 
     def _add_map_scan(self, kf: int, offset: Pose, scan: Scan) -> None:
         """Keep this tracked scan for the occupancy grid when it is far enough from the last."""
@@ -356,20 +419,24 @@ class Slam:
             odo = self._odometry_step(self.keyframes[i].odom, odom)
             dist = math.hypot(odo[0], odo[1])
             sxy = cfg.odom_sigma_xy_m + cfg.odom_sigma_fraction * dist
-            if self._gyro_since_keyframe:
+            gyro = self._gyro_since_keyframe
+            wheels = cfg.calibrate_odometry and cfg.wheel_travel_scale_error > 0 and not gyro
+            slipped = False
+            if gyro or wheels:
                 stiff = cfg.gyro_odom_sigma_xy_m + cfg.gyro_odom_sigma_xy_fraction * dist
                 if info is None or math.hypot(odo[0] - z[0], odo[1] - z[1]) <= SLIP_SIGMAS * stiff:
-                    sxy = stiff
+                    if gyro or self._wheel_travel_known():
+                        sxy = stiff
                 else:
                     self.odometry_slips += 1
+                    slipped = True
             sth = self._heading_sigma(
-                self._gyro_since_keyframe,
-                abs(odo[2]),
-                cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * abs(odo[2]),
+                gyro, abs(odo[2]), cfg.odom_sigma_theta_rad + cfg.odom_sigma_fraction * abs(odo[2])
             )
             self.graph.add_edge(i, node, odo, np.diag([sxy**-2, sxy**-2, sth**-2]), KIND_ODOM)
-            if cfg.calibrate_odometry and self._gyro_since_keyframe:
-                self._odometry_edges.append((self.graph.edges[-1], relative(self.keyframes[i].odom, odom)))
+            if cfg.calibrate_odometry and (gyro or (wheels and not slipped)):  # measured again
+                raw = relative(self.keyframes[i].odom, odom)
+                self._odometry_edges.append((self.graph.edges[-1], raw, gyro))
         self._gyro_since_keyframe = True
         self._rebuild_local()
 
@@ -476,13 +543,23 @@ class Slam:
         return stats
 
     def _recalibrate_odometry_edges(self) -> None:
-        """Measure the gyro-turned odometry edges again with the calibration learnt so far:
+        """Measure the calibrated odometry edges again with the calibration learnt so far:
         the first metres were driven before it was known (2 % of scale is 16 cm over 8 m),
-        and the estimate gets better as the drive goes on. Wheel-turned edges keep the
-        calibration of their time: measured again (in heading, or only in travel), wheels-only
-        drives slid (docs/slam.md, "Odometry edges measured again")."""
-        for edge, raw in self._odometry_edges:
-            edge.z = self.odometry_calibration.correct(raw)
+        and the estimate gets better as the drive goes on. A gyro's scale error and bias are
+        the sensor's own, so its edges' heading is measured again too. The wheels' edges only
+        once the scale is known (``wheel_travel_scale_error``), and in x, y only: they keep the
+        heading of their time (measured again, wheels-only drives slid: docs/slam.md, "Odometry
+        edges measured again"); measured again with a scale still 1 % off, a 25 m drive's
+        map came out 0.4-0.9 % long."""
+        cfg, known = self.config, self._wheel_travel_known()
+        for edge, raw, gyro in self._odometry_edges:
+            z = self.odometry_calibration.correct(raw)
+            if gyro:
+                edge.z = z
+            elif known:  # the wheels' travel, stiff: x, y only
+                edge.z = (z[0], z[1], edge.z[2])
+                sxy = cfg.gyro_odom_sigma_xy_m + cfg.gyro_odom_sigma_xy_fraction * math.hypot(z[0], z[1])
+                edge.information = np.diag([sxy**-2, sxy**-2, edge.information[2, 2]])
 
     @property
     def pending_keyframes(self) -> int:
@@ -512,6 +589,7 @@ class Slam:
             self._last_odom = None
             self.odometry_calibration.forget_anchors()
             self._end_walls = EndWallRuler()
+            self._wheel_line = None
             self._gyro_since_keyframe = False  # the new session's odometry starts here
             self._last_map_offset = (0.0, 0.0, 0.0)
             self._rebuild_local()

@@ -204,6 +204,7 @@ class SlamNode(Node):
             "keyframes": len(self.slam.keyframes),
             "loop_closures": self.slam.loop_closures,
             "odometry_slips": self.slam.odometry_slips,
+            "doubtful_turns": self.slam.doubtful_turns,
             "score": round(self.slam.last_score, 3),
         }
 

@@ -22,6 +22,9 @@ Another ruler's readings of the scale count as stretches too (:meth:`OdometryCal
 the lidar's range to a wall straight ahead while driving straight, :mod:`endwall`), once the
 stretches have compared ``GATE_AFTER_M`` and within ``MAX_RULER_DISAGREEMENT`` of their scale.
 
+How well the scale is known: :attr:`OdometryCalibration.scale_error`, the standard error of
+the stretches' and rulers' readings (SLAM trusts the wheels' travel once it is small).
+
 The turns' scale too (the wheels' track width, a gyro's sensitivity: both read a turn a
 percent or two off): the matched turn over the odometry's, from turns of at least
 ``TURN_BASELINE_RAD`` between two matched scans (a bare corridor pins the heading down even
@@ -61,6 +64,7 @@ MAX_OUTLIERS_IN_ROW = 4  # this many disagreeing stretches in a row: the odometr
 MEMORY_M = 200.0  # older stretches fade out over about this many metres
 SCALE_LIMITS = (0.8, 1.2)  # a scale outside this is not believed
 MAX_YAW_DRIFT_RAD_PER_M = 0.05
+MIN_READINGS = 5.0  # the scale's standard error is estimated from at least this many readings
 MIN_CALIBRATED_M = 4.0  # corrections apply once this much odometry has been compared
 # The turn scale (matched turn / odometry turn): from turns of at least TURN_BASELINE_RAD
 # between two matched scans (the scans pin the heading down as well in a bare corridor)
@@ -94,11 +98,28 @@ class OdometryCalibration:
         self.outliers = 0  # stretches left out: matched and odometry lengths disagreed
         self.ruler_outliers = 0  # other rulers' readings left out (add_ruler)
         self._stretches_m = 0.0  # odometry the stretches compared since the start or a reset (m)
+        # decaying sums over the scale's readings (stretches and rulers), weighed by their
+        # odometry length w: sum w, w², w r, w r² of the readings' scale r
+        self._moments = (0.0, 0.0, 0.0, 0.0)
         self._outliers_in_row = 0
 
     @property
     def calibrated(self) -> bool:
         return self._sum_odom >= MIN_CALIBRATED_M
+
+    @property
+    def scale_error(self) -> float:
+        """The standard error of the scale learnt (a fraction; inf before ``MIN_READINGS``
+        readings): the spread of the readings' scales over the square root of how many count
+        (weighed by their length, the old ones fading out as in the scale itself)."""
+        w, w2, wr, wr2 = self._moments
+        if w <= 0 or w2 <= 0:
+            return math.inf
+        n = w * w / w2
+        if n < MIN_READINGS:
+            return math.inf
+        mean = wr / w
+        return math.sqrt(max(wr2 / w - mean * mean, 0.0) / n)
 
     @property
     def turn_calibrated(self) -> bool:
@@ -141,6 +162,7 @@ class OdometryCalibration:
             # ...or the odometry changed (a tyre, a load): what was learnt no longer holds
             self._sum_est = self._sum_odom = self._sum_yaw = self._sum_yaw_odom = 0.0
             self._stretches_m = 0.0
+            self._moments = (0.0, 0.0, 0.0, 0.0)
         self._outliers_in_row = 0
         self._stretches_m += dist
         self._add_length(matched, dist)
@@ -171,8 +193,14 @@ class OdometryCalibration:
         keep = math.exp(-dist / MEMORY_M)
         self._sum_est = keep * self._sum_est + matched
         self._sum_odom = keep * self._sum_odom + dist
+        self._add_moments(keep, matched / dist, dist)
         scale = self._sum_est / self._sum_odom
         self.scale = min(max(scale, SCALE_LIMITS[0]), SCALE_LIMITS[1])
+
+    def _add_moments(self, keep: float, r: float, w: float) -> None:
+        """One more reading of the scale, ``r`` over ``w`` m; the older ones weigh ``keep``."""
+        sw, sw2, swr, swr2 = self._moments
+        self._moments = (keep * sw + w, keep**2 * sw2 + w * w, keep * swr + w * r, keep * swr2 + w * r * r)
 
     def moved(self, before: Pose, after: Pose) -> None:
         """The map moved under the tracker (an optimisation: a loop closed): the current pose

@@ -145,6 +145,7 @@ def quality_report(slam: Slam) -> dict[str, Any]:
         "loops_rejected": slam.loops_rejected,
         "optimizations": slam.optimizations,
         "odometry_slips": slam.odometry_slips,
+        "doubtful_turns": slam.doubtful_turns,
         "edges": edges,
     }
 

@@ -3,8 +3,9 @@
 The engine's defaults (:class:`~sage_robot.nav.slam.engine.SlamConfig`) suit a survey-grade
 scanner (the SICK of the CARMEN logs). With a noisy lidar, long corridors need the fixes of
 issue #23 (``docs/slam.md``, "SLAM in simulation"): scan-to-submap edges, odometry
-calibration (and, with the gyro, odometry edges that trust it and the lidar's range to a wall
-straight ahead as a second ruler of the odometry's scale), oriented and smoothed map
+calibration, odometry edges that trust its travel (and, with the gyro, its heading), the lidar's
+range to a wall straight ahead as a second ruler of the odometry's scale, doubtful matches that
+turn far from the odometry left out, oriented and smoothed map
 normals, local-map points two keyframes agree on, people's legs left out of matching,
 pairings weighed by the range noise, and weighed the same where the scan pins the pose in
 every direction. The robot's
@@ -29,6 +30,13 @@ EQUAL_WEIGHTS_ISOTROPY = 0.25
 # (m) + this fraction of the distance (the wheels' random noise is ~1 cm after 1 m)
 GYRO_ODOM_SIGMA_XY_M = 0.005
 GYRO_ODOM_SIGMA_XY_FRACTION = 0.03
+# The wheels' odometry edges are stiff once the calibration's scale is known to this standard
+# error (a fraction): on the corridor drive after about 170 m; at 0.5 % (after 30-40 m) a
+# 40 m drive came out 0.6 % long (docs/slam.md, "The wheels alone")
+WHEEL_TRAVEL_SCALE_ERROR = 0.002
+# A doubtful match turned this far (rad) from the odometry's prediction is not believed: the
+# odometry turns a few thousandths of a radian off in a scan (the wheels once calibrated, a gyro)
+DOUBTFUL_TURN_GATE_RAD = 0.1
 
 
 def noisy_lidar_config(base: SlamConfig, range_noise_fraction: float) -> SlamConfig:
@@ -43,6 +51,8 @@ def noisy_lidar_config(base: SlamConfig, range_noise_fraction: float) -> SlamCon
         end_wall_ruler=True,
         gyro_odom_sigma_xy_m=GYRO_ODOM_SIGMA_XY_M,
         gyro_odom_sigma_xy_fraction=GYRO_ODOM_SIGMA_XY_FRACTION,
+        wheel_travel_scale_error=WHEEL_TRAVEL_SCALE_ERROR,
+        doubtful_turn_gate_rad=DOUBTFUL_TURN_GATE_RAD,
         oriented_normals=True,
         map_normal_neighbours=MAP_NORMAL_NEIGHBOURS,
         map_min_support=MAP_MIN_SUPPORT,
