@@ -90,9 +90,10 @@ class SlamConfig:
     # "The wheels alone"). A slip still falls back to the weak noise (SLIP_SIGMAS).
     wheel_travel_scale_error: float = 0.0
     # > 0: a doubtful match (inliers below DOUBTFUL_INLIERS) whose heading is this far (rad) from
-    # the odometry's prediction is not believed, and the scan is dead-reckoned: the wheels turn
-    # a hundredth of a radian off in a scan, a scan that fits the local map poorly fits a turned
-    # copy of it about as well (a robot turning in a doorway, docs/slam.md, "The wheels alone")
+    # the odometry's prediction is not believed, and the scan is dead-reckoned: the odometry
+    # turns a few thousandths of a radian off in a scan, and a scan that fits the local map
+    # poorly fits a turned copy of it about as well (a robot turning in a doorway, docs/slam.md,
+    # "The wheels alone")
     doubtful_turn_gate_rad: float = 0.0
     odom_sigma_xy_m: float = 0.05  # odometry edge noise: base + fraction of the motion
     odom_sigma_theta_rad: float = 0.03
