@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 
 from sage_robot.core.geometry import compose, relative
 from sage_robot.nav.slam.dynamic import small_foreground, supported
-from sage_robot.nav.slam.endwall import EndWallRuler, WallFit
+from sage_robot.nav.slam.endwall import EndWallRuler
 from sage_robot.nav.slam.matcher import Match, MatchConfig, PointMap, smooth_normals
 from sage_robot.nav.slam.odomcal import OdometryCalibration
 from sage_robot.nav.slam.points import Pose, Scan, normals, rotate, transform, voxel_filter, voxel_indices
@@ -112,9 +112,9 @@ class SlamConfig:
     loop_information_scale: float = 0.5  # a loop edge counts this much of a scan-match edge
     loop_every_keyframes: int = 2  # try a loop closure every this many keyframes
     calibrate_odometry: bool = False  # learn the odometry's scale and heading drift (odomcal)
-    # ...also from the lidar's straight-ahead range while the robot drives straight (endwall;
-    # judged on the gyro's heading, or without a gyro on the tracked one): a ruler without the
-    # scan matcher's travel bias
+    # ...also from the lidar's straight-ahead range while the gyro holds the heading (endwall):
+    # a ruler without the scan matcher's travel bias (without a gyro, judged on the tracked
+    # heading, it read the depot's and the warehouse's travel worse: docs/slam.md, "The wheels alone")
     end_wall_ruler: bool = False
     oriented_normals: bool = False  # match only map surfaces that face the scan's sensor
     # > 0: the local map's normals are fitted again on the merged keyframes, to this many
@@ -214,7 +214,6 @@ class Slam:
         self._since_optimization = 0  # keyframes added since the graph was last optimised
         self.odometry_calibration = OdometryCalibration()
         self._end_walls = EndWallRuler()
-        self._wheel_line: Pose | None = None  # the wheels' travel laid along the tracked heading
         self.doubtful_turns = 0  # doubtful matches not believed: turned away from the odometry
         # odometry edges, their raw steps and whether the gyro turned them: each optimisation
         # measures them again with the calibration learnt so far (calibrate_odometry; the
@@ -230,8 +229,9 @@ class Slam:
         """Track one scan taken at the odometry pose ``odom``; ``gyro``: the odometry's turn
         since the previous scan is a gyro's (:mod:`~sage_robot.nav.slam.gyro`)."""
         cfg = self.config
-        if cfg.calibrate_odometry and cfg.end_wall_ruler and gyro:
-            self._end_wall_fits(self._end_walls.step(odom, scan), wheels=False)
+        if cfg.calibrate_odometry and cfg.end_wall_ruler:  # a straight stretch needs the gyro
+            for fit in self._end_walls.step(odom, scan) if gyro else self._end_walls.end():
+                self.odometry_calibration.add_ruler(fit.scale, fit.span_m)
         q = voxel_filter(self._scan_points(scan), cfg.scan_voxel_m)
         if self._last_odom is None and self.keyframes:  # a resumed session: start at its last keyframe
             self._last_odom = odom
@@ -240,7 +240,6 @@ class Slam:
             self._add_keyframe(stamp, odom, scan, self.initial_pose, None)
             self.trajectory.append(_TrajectoryEntry(stamp, 0, (0.0, 0.0, 0.0)))
             return StepResult(self.pose, 1.0, 1.0, True, False)
-        forward = relative(self._last_odom, odom)[0]  # the wheels' travel (m, raw)
         step = self._odometry_step(self._last_odom, odom)
         odometry = compose(self.pose, step)
         self._last_odom = odom
@@ -256,8 +255,6 @@ class Slam:
         else:
             pose, score, inliers = match.pose, match.score, match.inliers
             self.odometry_calibration.observe(pose, odom, match.information)
-        if cfg.calibrate_odometry and cfg.end_wall_ruler and not gyro:
-            self._wheel_end_walls(forward, pose[2] if score > 0 else None, scan)
         self._last_step = relative(self.pose, pose)
         self.pose, self.last_score = pose, score
         kf = len(self.keyframes) - 1
@@ -308,27 +305,6 @@ class Slam:
         if gate <= 0 or match.inliers >= DOUBTFUL_INLIERS:
             return False
         return abs(math.remainder(match.pose[2] - odometry[2], 2 * math.pi)) > gate
-
-    def _wheel_end_walls(self, forward_m: float, heading: float | None, scan: Scan) -> None:
-        """The end-wall ruler without a gyro: the wheels' travel laid along the tracked heading
-        (a corridor pins the heading down; the wheels' own drifts 0.01 rad a metre, which the
-        ruler would take for turns). ``heading`` None: the scan was not matched."""
-        if heading is None:
-            self._end_wall_fits(self._end_walls.end(), wheels=False)
-            return
-        fits = self._end_walls.end() if self._wheel_line is None else []  # a gyro's stretch ends
-        self._end_wall_fits(fits, wheels=True)
-        x, y, _ = self._wheel_line or (0.0, 0.0, heading)
-        self._wheel_line = (x + forward_m * math.cos(heading), y + forward_m * math.sin(heading), heading)
-        self._end_wall_fits(self._end_walls.step(self._wheel_line, scan), wheels=True)
-
-    def _end_wall_fits(self, fits: list[WallFit], wheels: bool) -> None:
-        """Hand the ruler's fits to the calibration; ``wheels``: the stretch goes on along the
-        tracked heading (else a gyro's or none: the wheels' line starts again)."""
-        if not wheels:
-            self._wheel_line = None
-        for fit in fits:
-            self.odometry_calibration.add_ruler(fit.scale, fit.span_m)
 
     def _add_map_scan(self, kf: int, offset: Pose, scan: Scan) -> None:
         """Keep this tracked scan for the occupancy grid when it is far enough from the last."""
@@ -590,7 +566,6 @@ class Slam:
             self._last_odom = None
             self.odometry_calibration.forget_anchors()
             self._end_walls = EndWallRuler()
-            self._wheel_line = None
             self._gyro_since_keyframe = False  # the new session's odometry starts here
             self._last_map_offset = (0.0, 0.0, 0.0)
             self._rebuild_local()

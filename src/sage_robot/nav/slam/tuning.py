@@ -3,9 +3,9 @@
 The engine's defaults (:class:`~sage_robot.nav.slam.engine.SlamConfig`) suit a survey-grade
 scanner (the SICK of the CARMEN logs). With a noisy lidar, long corridors need the fixes of
 issue #23 (``docs/slam.md``, "SLAM in simulation"): scan-to-submap edges, odometry
-calibration, odometry edges that trust its travel (and, with the gyro, its heading), the lidar's
-range to a wall straight ahead as a second ruler of the odometry's scale, doubtful matches that
-turn far from the odometry left out, oriented and smoothed map
+calibration, odometry edges that trust its travel once its scale is known (and, with the gyro,
+its heading too, and the lidar's range to a wall straight ahead as a second ruler of the
+odometry's scale), doubtful matches that turn far from the odometry left out, oriented and smoothed map
 normals, local-map points two keyframes agree on, people's legs left out of matching,
 pairings weighed by the range noise, and weighed the same where the scan pins the pose in
 every direction. The robot's
