@@ -87,7 +87,9 @@ class SlamConfig:
     # optimisation measures their x, y again with the calibration. Along a bare corridor only
     # the odometry knows the travel; with weak edges the map took the tracker's, which wanders
     # four times more; with a scale not yet known they carry its error instead (docs/slam.md,
-    # "The wheels alone"). A slip still falls back to the weak noise (SLIP_SIGMAS).
+    # "The wheels alone"). Before that, an edge's x, y sigma is the stiff one times the scale's
+    # standard error over this gate, at most the wheels' weak one: stiffer as the scale becomes
+    # known, not measured again. A slip still falls back to the weak noise (SLIP_SIGMAS).
     wheel_travel_scale_error: float = 0.0
     # > 0: a doubtful match (inliers below DOUBTFUL_INLIERS) whose heading is this far (rad) from
     # the odometry's prediction is not believed, and the scan is dead-reckoned: the odometry
@@ -404,6 +406,9 @@ class Slam:
                 if info is None or math.hypot(odo[0] - z[0], odo[1] - z[1]) <= SLIP_SIGMAS * stiff:
                     if gyro or self._wheel_travel_known():
                         sxy = stiff
+                    elif wheels:  # stiffer as the scale becomes known (weak while unknown: inf)
+                        graded = stiff * self.odometry_calibration.scale_error / cfg.wheel_travel_scale_error
+                        sxy = min(sxy, graded)
                 else:
                     self.odometry_slips += 1
                     slipped = True

@@ -32,7 +32,8 @@ GYRO_ODOM_SIGMA_XY_M = 0.005
 GYRO_ODOM_SIGMA_XY_FRACTION = 0.03
 # The wheels' odometry edges are stiff once the calibration's scale is known to this standard
 # error (a fraction): on the corridor drive after about 170 m; at 0.5 % (after 30-40 m) a
-# 40 m drive came out 0.6 % long (docs/slam.md, "The wheels alone")
+# 40 m drive came out 0.6 % long (docs/slam.md, "The wheels alone"). Before, their sigma is the
+# stiff one times the scale's error over this, at most the weak one.
 WHEEL_TRAVEL_SCALE_ERROR = 0.002
 # A doubtful match turned this far (rad) from the odometry's prediction is not believed: the
 # odometry turns a few thousandths of a radian off in a scan (the wheels once calibrated, a gyro)
